@@ -1,0 +1,33 @@
+#pragma once
+/// Crash-safe output: write to "<path>.tmp.<pid>" and rename into place on Commit(), so a failed or
+/// interrupted run never leaves a half-written file under the final name.
+#include <fstream>
+#include <string>
+
+namespace planeslam::datasets {
+
+class AtomicOutputFile {
+ public:
+  /// Opens the temporary file; throws IoError naming `path` when it cannot be created.
+  explicit AtomicOutputFile(std::string path, bool binary = false);
+  /// Removes the temporary file if Commit() was not reached.
+  ~AtomicOutputFile();
+  AtomicOutputFile(const AtomicOutputFile&) = delete;
+  AtomicOutputFile& operator=(const AtomicOutputFile&) = delete;
+
+  std::ostream& stream() { return stream_; }
+  /// Flushes, closes and renames into place; throws IoError on any write failure.
+  void Commit();
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string path_;
+  std::string tmp_path_;
+  std::ofstream stream_;
+  bool committed_ = false;
+};
+
+/// Writes `bytes` to `path` atomically.
+void WriteFileAtomic(const std::string& path, const std::string& bytes);
+
+}  // namespace planeslam::datasets

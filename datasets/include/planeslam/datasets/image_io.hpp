@@ -1,0 +1,36 @@
+#pragma once
+/// PNG images in and out (libpng). Reads validate size and bit depth and throw IoError naming the
+/// file; writes go to a temporary name and are renamed into place (no half-written files).
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace planeslam::datasets {
+
+/// Single-channel 16-bit image (depth in sensor units, or plane labels), row-major.
+struct Image16 {
+  int width = 0;
+  int height = 0;
+  std::vector<std::uint16_t> data;
+  Image16() = default;
+  Image16(int w, int h) : width(w), height(h), data(static_cast<std::size_t>(w) * h, 0) {}
+};
+
+/// 8-bit RGB image, row-major, 3 bytes per pixel.
+struct ImageRgb8 {
+  int width = 0;
+  int height = 0;
+  std::vector<std::uint8_t> data;
+  ImageRgb8() = default;
+  ImageRgb8(int w, int h) : width(w), height(h), data(static_cast<std::size_t>(w) * h * 3, 0) {}
+};
+
+/// Reads a single-channel PNG (16-bit, or 8-bit widened). Throws IoError on a missing, truncated
+/// or corrupt file, a colour image, or a size above the configured limits.
+Image16 ReadPng16(const std::string& path);
+/// Writes a 16-bit grey PNG atomically.
+void WritePng16(const std::string& path, const Image16& image);
+/// Writes an 8-bit RGB PNG atomically.
+void WritePngRgb(const std::string& path, const ImageRgb8& image);
+
+}  // namespace planeslam::datasets

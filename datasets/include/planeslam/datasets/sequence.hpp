@@ -1,0 +1,37 @@
+#pragma once
+/// A sequence of range frames with optional ground truth, whatever the source format.
+#include <cstddef>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "planeslam/datasets/organized_cloud.hpp"
+#include "planeslam/datasets/trajectory.hpp"
+
+namespace planeslam::datasets {
+
+/// One range frame.
+struct Frame {
+  std::size_t index = 0;                ///< position in the sequence
+  double timestamp = 0.0;               ///< [s]
+  std::string source;                   ///< file it was read from (for messages)
+  OrganizedCloud cloud;                 ///< metres, sensor frame
+  std::optional<Pose> T_world_sensor_gt;  ///< ground-truth pose when the sequence has one
+};
+
+/// Random-access source of frames. Load() reads from disk (or generates) on demand and throws
+/// IoError naming the file on bad data.
+class Sequence {
+ public:
+  virtual ~Sequence() = default;
+  virtual std::size_t Size() const = 0;
+  virtual Frame Load(std::size_t index) const = 0;
+  /// Human-readable name (folder or scene).
+  virtual std::string Name() const = 0;
+  /// Timestamp of frame i without loading it.
+  virtual double Timestamp(std::size_t index) const = 0;
+  /// Ground-truth pose of frame i, if known, without loading it.
+  virtual std::optional<Pose> GroundTruth(std::size_t index) const = 0;
+};
+
+}  // namespace planeslam::datasets
