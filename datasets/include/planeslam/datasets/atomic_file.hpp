@@ -25,7 +25,12 @@ class AtomicOutputFile {
   std::string tmp_path_;
   std::ofstream stream_;
   bool committed_ = false;
+  int slot_ = -1;  ///< entry in the table of active temporary files (for signal handlers)
 };
+
+/// Unlinks every temporary file currently open by an AtomicOutputFile. Async-signal-safe: meant for
+/// a signal handler that exits at once (a second Ctrl-C), so no partial file is left behind.
+void RemoveActiveTempFilesFromSignalHandler();
 
 /// Writes `bytes` to `path` atomically.
 void WriteFileAtomic(const std::string& path, const std::string& bytes);
