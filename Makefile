@@ -14,7 +14,10 @@ DEB_PACKAGES := build-essential cmake ccache pkg-config libeigen3-dev libceres-d
   nlohmann-json3-dev clang libclang-rt-14-dev
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: deps configure build run test clean
+SAN_BUILD_DIR ?= build-asan
+FUZZ_SECONDS ?= 30
+
+.PHONY: deps configure build run test sanitize fuzz ci clean
 
 deps:
 	@missing=$$(for p in $(DEB_PACKAGES); do dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null \
@@ -37,5 +40,21 @@ run: build
 test: build
 	cd $(BUILD_DIR) && ctest --output-on-failure -j$(JOBS)
 
+# The whole test suite under AddressSanitizer + UndefinedBehaviorSanitizer (clang; PCL baselines
+# off to keep the build short). The same build carries the libFuzzer targets.
+sanitize: deps
+	CC=clang CXX=clang++ cmake -S . -B $(SAN_BUILD_DIR) -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  -DPLANESLAM_SANITIZERS="address;undefined" -DPLANESLAM_WITH_PCL=OFF -DPLANESLAM_BUILD_FUZZERS=ON
+	cmake --build $(SAN_BUILD_DIR) -j$(JOBS)
+	cd $(SAN_BUILD_DIR) && ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
+	  ctest --output-on-failure -j$(JOBS)
+
+# Bounded fuzzing of every parser ($(FUZZ_SECONDS) s each); fails on any crash, hang or report.
+fuzz: sanitize
+	./tests/fuzz/run_fuzzers.sh $(SAN_BUILD_DIR)/bin $(FUZZ_SECONDS)
+
+# What CI runs: the README test command, then the sanitizer suite and the fuzzers.
+ci: test fuzz
+
 clean:
-	rm -rf $(BUILD_DIR)
+	rm -rf $(BUILD_DIR) $(SAN_BUILD_DIR)
