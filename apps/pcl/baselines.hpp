@@ -1,0 +1,98 @@
+#pragma once
+/// In-process PCL baselines for `planeslam bench`: PCL's OrganizedMultiPlaneSegmentation (plane
+/// detection) and GeneralizedIterativeClosestPoint (frame-to-frame odometry).
+///
+/// This header is PCL-free on purpose: PCL's headers are slow to compile, so every PCL include lives
+/// in apps/pcl/baselines.cpp. Code outside apps/pcl/ must guard its use with
+/// `#ifdef PLANESLAM_HAVE_PCL_BASELINES` (the library is only built when PCL is found).
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "planeslam/datasets/organized_cloud.hpp"
+#include "planeslam/datasets/trajectory.hpp"
+#include "planeslam/detection/plane.hpp"
+#include "planeslam/detection/plane_detector.hpp"
+
+namespace planeslam::app::pcl_baselines {
+
+/// Settings of the `pcl_omps` baseline: IntegralImageNormalEstimation followed by
+/// OrganizedMultiPlaneSegmentation::segment(). The defaults are tuned so the baseline is not a straw
+/// man on noisy Kinect data (see bench notes); PCL's own default maximum curvature (0.001) rejects
+/// almost every real Kinect plane because depth noise grows with z^2.
+struct OmpsConfig {
+  /// "covariance" (COVARIANCE_MATRIX) or "average_3d_gradient" (AVERAGE_3D_GRADIENT).
+  std::string normal_method = "covariance";
+  /// Depth discontinuity factor: neighbours whose depth differs more than factor*z are not smoothed
+  /// across [1/m]. PCL's organized segmentation demo uses 0.02.
+  double max_depth_change_factor = 0.02;
+  /// Smoothing window of the integral-image normals [px] (scaled with depth by PCL).
+  double normal_smoothing_size = 20.0;
+  /// Minimum region size [px]; matches the 2000 px "large plane" bar of the quality suite.
+  int min_inliers = 2000;
+  /// Maximum angle between neighbouring normals inside one region [deg].
+  double angular_threshold_deg = 3.0;
+  /// Maximum difference of neighbouring plane offsets; PCL scales it by z^2 [m at z = 1 m].
+  double distance_threshold = 0.02;
+  /// Maximum "surface variation" lambda_min / (lambda_0+lambda_1+lambda_2) of a region [-].
+  double maximum_curvature = 0.01;
+};
+
+/// The OMPS baseline as a PlaneDetector (name "pcl_omps"). Planes are refitted from their inlier
+/// pixels with detection::PlaneMoments, so normal orientation (d >= 0) matches ours.
+/// Segmentation::timings_ms holds "convert", "normals", "segment", "output"; benchmarks should time
+/// only "normals" + "segment" (PCL's own work) to be conservative.
+class OmpsDetector : public detection::PlaneDetector {
+ public:
+  explicit OmpsDetector(OmpsConfig config = {});
+  std::string Name() const override { return "pcl_omps"; }
+  detection::Segmentation Detect(const datasets::OrganizedCloud& cloud) const override;
+  const OmpsConfig& config() const { return config_; }
+
+ private:
+  OmpsConfig config_;
+};
+
+/// Settings of the PCL GICP odometry baseline.
+struct GicpConfig {
+  double voxel_size = 0.05;                 ///< VoxelGrid leaf size [m]
+  double max_correspondence_distance = 0.2; ///< [m]
+  int max_iterations = 50;                  ///< outer ICP iterations
+  int correspondence_randomness = 20;       ///< k neighbours for the point covariances
+  double transformation_epsilon = 1e-6;     ///< convergence on the transform change
+  double max_range = 0.0;                   ///< drop points farther than this [m]; 0 = keep all
+};
+
+/// Result of one GICP step.
+struct GicpStep {
+  Pose T_prev_curr = Pose::Identity();  ///< maps current-frame points into the previous frame
+  bool converged = false;
+  double fitness = 0.0;        ///< PCL's mean squared correspondence distance [m^2]
+  std::size_t source_points = 0;  ///< after voxel downsampling
+  double time_ms = 0.0;        ///< downsampling + covariances + alignment (excludes conversion)
+};
+
+/// Frame-to-frame GICP odometry with a constant-velocity prior: the initial guess for frame k is the
+/// motion estimated for frame k-1 (identity for the first pair), as in our PlaneOdometry. The
+/// previous frame's downsampled cloud and point covariances are kept and reused as the target, so
+/// every frame's covariances are computed once (the fair, fast way to run PCL's GICP).
+class GicpOdometry {
+ public:
+  explicit GicpOdometry(GicpConfig config = {});
+  ~GicpOdometry();
+  GicpOdometry(const GicpOdometry&) = delete;
+  GicpOdometry& operator=(const GicpOdometry&) = delete;
+
+  /// Feeds the next frame. The first call returns identity with converged = true.
+  GicpStep Track(const datasets::OrganizedCloud& cloud);
+  /// Forgets the previous frame and the velocity.
+  void Reset();
+
+ private:
+  struct State;
+  GicpConfig config_;
+  std::unique_ptr<State> state_;
+};
+
+}  // namespace planeslam::app::pcl_baselines
