@@ -1,0 +1,206 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+#include "planeslam/datasets/errors.hpp"
+#include "planeslam/datasets/image_io.hpp"
+#include "planeslam/datasets/sequence_factory.hpp"
+#include "planeslam/datasets/tum_sequence.hpp"
+#include "test_support.hpp"
+
+namespace planeslam::datasets {
+namespace {
+
+namespace fs = std::filesystem;
+
+void WriteText(const fs::path& path, const std::string& text) {
+  std::ofstream out(path, std::ios::binary);
+  out << text;
+}
+
+std::string ErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const IoError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+// ---------------------------------------------------------------------------------------------
+// Real TUM fr3 data.
+
+fs::path TumDir() { return test::DataDir() / "tum_fr3_structure_notexture_far"; }
+
+TEST(TumSequence, FirstFrameMatchesDirectDecode) {
+  PLANESLAM_REQUIRE_DATA();
+  const auto seq = OpenSequence(TumDir().string(), SensorConfig{});
+  ASSERT_EQ(seq->Size(), 252u);
+  const Frame frame = seq->Load(0);
+  EXPECT_EQ(frame.cloud.width, 640);
+  EXPECT_EQ(frame.cloud.height, 480);
+  EXPECT_DOUBLE_EQ(frame.timestamp, 1341836537.655691);
+  // Count the measurements of the PNG independently of the back-projection.
+  const Image16 raw = ReadPng16((TumDir() / "depth" / "1341836537.655691.png").string());
+  std::size_t nonzero = 0;
+  for (auto d : raw.data) nonzero += d != 0 ? 1 : 0;
+  EXPECT_GT(nonzero, 100000u);
+  EXPECT_EQ(frame.cloud.CountValid(), nonzero);
+  // Depth is value / 5000 and the intrinsics come from intrinsics.yaml (fr3).
+  for (std::size_t i = 0; i < raw.data.size(); i += 997) {
+    if (raw.data[i] == 0) continue;
+    EXPECT_NEAR(frame.cloud.points[i].z(), raw.data[i] / 5000.0, 1e-6);
+    const int u = static_cast<int>(i % 640), v = static_cast<int>(i / 640);
+    EXPECT_NEAR(frame.cloud.points[i].x(), (u - 320.1) * raw.data[i] / 5000.0 / 535.4, 1e-5);
+    EXPECT_NEAR(frame.cloud.points[i].y(), (v - 247.6) * raw.data[i] / 5000.0 / 539.2, 1e-5);
+  }
+}
+
+TEST(TumSequence, AllFramesAndGroundTruthAssociations) {
+  PLANESLAM_REQUIRE_DATA();
+  const auto seq = OpenTumSequence(TumDir().string(), SensorConfig{});
+  ASSERT_EQ(seq->Size(), 252u);
+  EXPECT_EQ(seq->GroundTruthCount(), 248u);  // README: 248 frames have a pose within 20 ms
+  for (std::size_t i = 1; i < seq->Size(); ++i) {
+    ASSERT_GT(seq->Timestamp(i), seq->Timestamp(i - 1));
+  }
+  // Loading agrees with the metadata and every frame decodes.
+  for (std::size_t i = 0; i < seq->Size(); i += 25) {
+    const Frame f = seq->Load(i);
+    EXPECT_EQ(f.index, i);
+    EXPECT_DOUBLE_EQ(f.timestamp, seq->Timestamp(i));
+    EXPECT_EQ(f.T_world_sensor_gt.has_value(), seq->GroundTruth(i).has_value());
+    EXPECT_GT(f.cloud.CountValid(), 50000u);
+  }
+  // A tighter association tolerance can only lose frames.
+  SensorConfig tight;
+  tight.gt_max_time_difference = 0.005;
+  EXPECT_LT(OpenTumSequence(TumDir().string(), tight)->GroundTruthCount(), 248u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Synthetic TUM folders.
+
+// A 4x3 camera, frames at the given stamps, all depth 1 m, and ground truth at `gt_stamps`
+// (translation x = stamp).
+fs::path MakeTumFolder(const fs::path& dir, const std::vector<std::string>& stamps,
+                       const std::vector<double>& gt_stamps) {
+  fs::create_directories(dir / "depth");
+  std::string list = "# depth maps\n# timestamp filename\n";
+  Image16 depth(4, 3);
+  for (auto& d : depth.data) d = 5000;
+  for (const auto& s : stamps) {
+    WritePng16((dir / "depth" / (s + ".png")).string(), depth);
+    list += s + " depth/" + s + ".png\n";
+  }
+  WriteText(dir / "depth.txt", list);
+  std::string gt = "# timestamp tx ty tz qx qy qz qw\n";
+  for (double t : gt_stamps) {
+    gt += std::to_string(t) + " " + std::to_string(t) + " 0 0 0 0 0 1\n";
+  }
+  if (!gt_stamps.empty()) WriteText(dir / "groundtruth.txt", gt);
+  WriteText(dir / "intrinsics.yaml",
+            "# tiny\nwidth: 4\nheight: 3\nfx: 5\nfy: 5\ncx: 1.5\ncy: 1\ndepth_scale: 5000\n");
+  return dir;
+}
+
+TEST(TumSequence, NearestStampAssociationWithinTolerance) {
+  const auto dir = MakeTumFolder(test::ScratchDir(), {"10.000", "10.100", "10.200"},
+                                 {9.99, 10.01, 10.125, 10.26});
+  const auto seq = OpenSequence(dir.string(), SensorConfig{});
+  ASSERT_EQ(seq->Size(), 3u);
+  // 10.000: nearest 9.99 and 10.01 both 0.01 away (either is within 20 ms).
+  ASSERT_TRUE(seq->GroundTruth(0).has_value());
+  EXPECT_NEAR(std::abs(seq->GroundTruth(0)->translation().x() - 10.0), 0.01, 1e-9);
+  // 10.100: nearest 10.125 is 25 ms away -> none.
+  EXPECT_FALSE(seq->GroundTruth(1).has_value());
+  // 10.200: nearest 10.26 (60 ms) -> none; 10.125 is 75 ms.
+  EXPECT_FALSE(seq->GroundTruth(2).has_value());
+  SensorConfig loose;
+  loose.gt_max_time_difference = 0.03;
+  const auto seq2 = OpenSequence(dir.string(), loose);
+  ASSERT_TRUE(seq2->GroundTruth(1).has_value());
+  EXPECT_DOUBLE_EQ(seq2->GroundTruth(1)->translation().x(), 10.125);
+  const Frame f = seq2->Load(1);
+  EXPECT_EQ(f.cloud.width, 4);
+  EXPECT_EQ(f.cloud.CountValid(), 12u);
+  EXPECT_FLOAT_EQ(f.cloud.at(0, 0).x(), -1.5f / 5.0f);
+}
+
+TEST(TumSequence, MissingListedFileNamesFileAndLine) {
+  const auto dir = MakeTumFolder(test::ScratchDir(), {"1.0", "2.0", "3.0"}, {});
+  fs::remove(dir / "depth" / "2.0.png");
+  const std::string msg = ErrorOf([&] { OpenSequence(dir.string(), SensorConfig{}); });
+  EXPECT_EQ(msg, (dir / "depth.txt").string() + ":4: names 'depth/2.0.png' which does not exist");
+}
+
+TEST(TumSequence, UnsortedAndDuplicateStampsAreRefused) {
+  const auto dir = MakeTumFolder(test::ScratchDir(), {"1.0", "2.0"}, {});
+  WriteText(dir / "depth.txt", "2.0 depth/2.0.png\n1.0 depth/1.0.png\n");
+  EXPECT_EQ(ErrorOf([&] { OpenSequence(dir.string(), SensorConfig{}); }),
+            (dir / "depth.txt").string() + ":2: unsorted timestamp 1.0 (previous line 1)");
+  WriteText(dir / "depth.txt", "1.0 depth/1.0.png\n# c\n1.0 depth/2.0.png\n");
+  EXPECT_EQ(ErrorOf([&] { OpenSequence(dir.string(), SensorConfig{}); }),
+            (dir / "depth.txt").string() + ":3: duplicate timestamp 1.0 (previous line 1)");
+  WriteText(dir / "depth.txt", "1.0 depth/1.0.png extra\n");
+  EXPECT_EQ(ErrorOf([&] { OpenSequence(dir.string(), SensorConfig{}); }),
+            (dir / "depth.txt").string() + ":1: expected 2 columns, got 3");
+}
+
+TEST(TumSequence, TruncatedPngInSequenceIsIoErrorOnLoad) {
+  const auto dir = MakeTumFolder(test::ScratchDir(), {"1.0", "2.0"}, {});
+  const fs::path png = dir / "depth" / "2.0.png";
+  fs::resize_file(png, fs::file_size(png) / 2);
+  const auto seq = OpenSequence(dir.string(), SensorConfig{});
+  EXPECT_NO_THROW(seq->Load(0));
+  const std::string msg = ErrorOf([&] { seq->Load(1); });
+  EXPECT_EQ(msg.rfind(png.string() + ": ", 0), 0u) << msg;
+}
+
+TEST(TumSequence, IntrinsicsFileIsStrict) {
+  const auto dir = MakeTumFolder(test::ScratchDir(), {"1.0"}, {});
+  const std::string yaml = (dir / "intrinsics.yaml").string();
+  WriteText(dir / "intrinsics.yaml", "width: 4\nheight: 3\nfx: 5\nfy: 5\ncx: 1\ncy: 1\n");
+  EXPECT_EQ(ErrorOf([&] { OpenSequence(dir.string(), SensorConfig{}); }),
+            yaml + ": missing key 'depth_scale'");
+  WriteText(dir / "intrinsics.yaml",
+            "width: 4\nheight: 3\nfx: 5\nfy: 5\ncx: 1\ncy: 1\ndepth_scale: 1\nk1: 0\n");
+  EXPECT_NE(ErrorOf([&] { OpenSequence(dir.string(), SensorConfig{}); })
+                .find(yaml + ":8: unknown key 'k1'"),
+            std::string::npos);
+  WriteText(dir / "intrinsics.yaml",
+            "width: 4\nheight: 3\nfx: five\nfy: 5\ncx: 1\ncy: 1\ndepth_scale: 1\n");
+  EXPECT_EQ(ErrorOf([&] { OpenSequence(dir.string(), SensorConfig{}); }),
+            yaml + ":3: key 'fx': expected a number, got 'five'");
+  // With intrinsics_source "config" the file is not read at all.
+  SensorConfig config;
+  config.intrinsics_source = "config";
+  config.intrinsics.width = 4;
+  config.intrinsics.height = 3;
+  EXPECT_EQ(OpenSequence(dir.string(), config)->Load(0).cloud.CountValid(), 12u);
+}
+
+TEST(SequenceFactory, MissingAndEmptyFolders) {
+  const auto dir = test::ScratchDir();
+  EXPECT_EQ(ErrorOf([&] { OpenSequence((dir / "nope").string(), SensorConfig{}); }),
+            (dir / "nope").string() + ": no such folder");
+  EXPECT_EQ(ErrorOf([&] { OpenSequence(dir.string(), SensorConfig{}); }),
+            dir.string() + ": folder is empty");
+  WriteText(dir / "readme.txt", "x");
+  EXPECT_NE(ErrorOf([&] { OpenSequence(dir.string(), SensorConfig{}); }).find("no known layout"),
+            std::string::npos);
+  EXPECT_EQ(ErrorOf([&] { LoadSingleFrame((dir / "nope.png").string(), SensorConfig{}); }),
+            (dir / "nope.png").string() + ": no such file");
+}
+
+TEST(SequenceFactory, EmptyFrameListIsIoError) {
+  const auto dir = test::ScratchDir();
+  WriteText(dir / "depth.txt", "# nothing\n");
+  EXPECT_EQ(ErrorOf([&] { OpenSequence(dir.string(), SensorConfig{}); }),
+            (dir / "depth.txt").string() + ": lists no frames");
+}
+
+}  // namespace
+}  // namespace planeslam::datasets
