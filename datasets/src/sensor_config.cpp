@@ -34,6 +34,9 @@ std::vector<std::string> SensorConfig::Validate() const {
     problems.push_back("intrinsics_source must be 'auto' or 'config'");
   }
   if (!finite(depth_scale) || depth_scale <= 0.0) problems.push_back("depth_scale must be > 0");
+  if (pcd_model != "pinhole" && pcd_model != "spherical") {
+    problems.push_back("pcd_model must be 'pinhole' or 'spherical'");
+  }
   if (!finite(unit_scale) || unit_scale <= 0.0) problems.push_back("unit_scale must be > 0");
   if (!finite(max_depth) || max_depth < 0.0) problems.push_back("max_depth must be >= 0");
   if (!finite(min_depth) || min_depth < 0.0) problems.push_back("min_depth must be >= 0");

@@ -6,6 +6,7 @@
 
 #include "planeslam/datasets/depth_image.hpp"
 #include "planeslam/datasets/errors.hpp"
+#include "planeslam/datasets/file_sequence.hpp"
 #include "planeslam/datasets/tum_sequence.hpp"
 
 namespace planeslam::datasets {
@@ -67,6 +68,7 @@ std::unique_ptr<Sequence> OpenSequence(const std::string& folder, const SensorCo
     case SequenceLayout::kIclNuim:
       return OpenIclSequence(folder, config);
     case SequenceLayout::kPcdFolder:
+      return OpenPcdFolder(folder, config);
     case SequenceLayout::kKittiBin:
       break;
   }
@@ -84,6 +86,10 @@ Frame LoadSingleFrame(const std::string& path, const SensorConfig& config) {
   if (ext == ".png") {
     frame.cloud = ReadDepthCloud(path, config.EffectiveIntrinsics(), config.depth_scale,
                                  config.min_depth, config.max_depth);
+    return frame;
+  }
+  if (ext == ".pcd") {
+    frame.cloud = ReadOrganizedPcd(path, config);
     return frame;
   }
   throw IoError(path, "unknown file type '" + ext + "' (expected .png, .pcd or .bin)");

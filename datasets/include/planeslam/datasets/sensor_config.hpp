@@ -24,6 +24,9 @@ struct SensorConfig {
   double max_depth = 0.0;  ///< [m] depth/range beyond this becomes invalid (NaN); 0 = no limit
   double min_depth = 0.0;  ///< [m] depth/range below this becomes invalid (NaN)
   double unit_scale = 1.0;  ///< PCD coordinates are multiplied by this to get metres (cm: 0.01)
+  /// Grid of organized PCD files: "pinhole" (depth camera, e.g. Kinect) or "spherical" (rows =
+  /// elevation, columns = azimuth: terrestrial laser scans).
+  std::string pcd_model = "pinhole";
   /// Largest |t_frame - t_groundtruth| for a ground-truth pose to be associated [s] (TUM tools: 0.02).
   double gt_max_time_difference = 0.02;
   /// LiDAR (.bin) range image: rows by elevation, columns by azimuth. HDL-64E at 10 Hz fires about
