@@ -29,8 +29,8 @@ struct OmpsConfig {
   double max_depth_change_factor = 0.02;
   /// Smoothing window of the integral-image normals [px] (scaled with depth by PCL).
   double normal_smoothing_size = 20.0;
-  /// Minimum region size [px]; matches the 2000 px "large plane" bar of the quality suite.
-  int min_inliers = 2000;
+  /// Minimum region size [px]; the same as our detectors' default minimum plane size (theta).
+  int min_inliers = 400;
   /// Maximum angle between neighbouring normals inside one region [deg].
   double angular_threshold_deg = 3.0;
   /// Maximum difference of neighbouring plane offsets; PCL scales it by z^2 [m at z = 1 m].
