@@ -1,0 +1,405 @@
+#include "planeslam/registration/plane_registration.hpp"
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/SVD>
+
+#include <algorithm>
+#include <cmath>
+
+#include "planeslam/datasets/errors.hpp"
+#include "plane_residual.hpp"
+
+namespace planeslam::registration {
+
+std::vector<std::string> RegistrationConfig::Validate() const {
+  std::vector<std::string> problems;
+  if (!(min_normal_sigma >= 0)) problems.push_back("min_normal_sigma must be >= 0");
+  if (!(min_offset_sigma >= 0)) problems.push_back("min_offset_sigma must be >= 0");
+  if (!(covariance_scale > 0)) problems.push_back("covariance_scale must be > 0");
+  if (!(fallback_point_sigma > 0)) problems.push_back("fallback_point_sigma must be > 0");
+  if (!(max_translation_sigma > 0)) problems.push_back("max_translation_sigma must be > 0");
+  if (!(max_rotation_sigma > 0)) problems.push_back("max_rotation_sigma must be > 0");
+  if (!(min_eigen_ratio >= 0 && min_eigen_ratio < 1))
+    problems.push_back("min_eigen_ratio must be in [0, 1)");
+  if (max_iterations < 0) problems.push_back("max_iterations must be >= 0");
+  if (!(convergence_step > 0)) problems.push_back("convergence_step must be > 0");
+  return problems;
+}
+
+Eigen::Matrix4d PlaneCovarianceOrFallback(const detection::Plane& plane,
+                                          double fallback_point_sigma) {
+  const Eigen::Matrix4d& own = plane.covariance;
+  if (own.allFinite() && own.diagonal().sum() > 0.0) return 0.5 * (own + own.transpose());
+
+  // Linearised least-squares plane fit with isotropic point noise sigma^2: a tilt about the
+  // in-plane axis e_k moves points at spread sqrt(lambda_k) (lambda_k = sum of squared distances
+  // along e_k), so Var = sigma^2 / lambda_k; the centroid moves by sigma^2 / K along n and
+  // d = n.c couples the two (Cov(n, d) = Cov(n) c).
+  const double sigma2 =
+      std::max(std::isfinite(plane.mse) ? plane.mse : 0.0, fallback_point_sigma * fallback_point_sigma);
+  const Eigen::Vector3d n = plane.normal.allFinite() && plane.normal.norm() > 0.5
+                                ? Eigen::Vector3d(plane.normal.normalized())
+                                : Eigen::Vector3d::UnitZ();
+  Eigen::Matrix3d axes;
+  Eigen::Vector3d lambda;
+  if (plane.moments.count() >= 3) {
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
+    es.computeDirect(plane.moments.Scatter());
+    axes = es.eigenvectors();
+    lambda = es.eigenvalues();
+  } else {
+    const Eigen::Matrix<double, 3, 2> u = TangentBasis(n);
+    axes << n, u;
+    lambda = plane.eigenvalues;
+  }
+  const double count = static_cast<double>(std::max<std::int64_t>(plane.point_count, 1));
+  Eigen::Matrix3d cov_n = Eigen::Matrix3d::Zero();
+  constexpr double kUnknownNormalVar = 0.01 * 0.01;  // 0.01 rad when nothing is known
+  for (int k = 1; k < 3; ++k) {
+    Eigen::Vector3d e = axes.col(k);
+    e -= n * n.dot(e);  // keep the covariance orthogonal to n (unit-norm constraint)
+    if (e.norm() < 1e-9) continue;
+    e.normalize();
+    const double var = lambda(k) > 1e-12 && std::isfinite(lambda(k)) ? sigma2 / lambda(k)
+                                                                      : kUnknownNormalVar;
+    cov_n += std::min(var, 1.0) * e * e.transpose();
+  }
+  const Eigen::Vector3d c = plane.centroid.allFinite() ? plane.centroid : Eigen::Vector3d(n * plane.d);
+  Eigen::Matrix4d cov = Eigen::Matrix4d::Zero();
+  cov.topLeftCorner<3, 3>() = cov_n;
+  cov.topRightCorner<3, 1>() = cov_n * c;
+  cov.bottomLeftCorner<1, 3>() = (cov_n * c).transpose();
+  cov(3, 3) = c.dot(cov_n * c) + sigma2 / count;
+  return cov;
+}
+
+namespace internal {
+
+bool MakeMatchData(const std::vector<detection::Plane>& prev,
+                   const std::vector<detection::Plane>& curr, const PlaneMatch& match,
+                   const RegistrationConfig& config, MatchData* out) {
+  PLANESLAM_CHECK(match.prev >= 0 && match.prev < static_cast<int>(prev.size()),
+                  "match.prev " << match.prev << " out of range " << prev.size());
+  PLANESLAM_CHECK(match.curr >= 0 && match.curr < static_cast<int>(curr.size()),
+                  "match.curr " << match.curr << " out of range " << curr.size());
+  const detection::Plane& a = prev[match.prev];
+  const detection::Plane& b = curr[match.curr];
+  // A plane without a usable normal is a data condition: it is left out, never a NaN.
+  if (!a.normal.allFinite() || !b.normal.allFinite() || !std::isfinite(a.d) ||
+      !std::isfinite(b.d) || a.normal.norm() < 0.5 || b.normal.norm() < 0.5) {
+    return false;
+  }
+  MatchData& m = *out;
+  m.match = match;
+  m.n_a = a.normal.normalized();
+  m.d_a = a.d;
+  m.n_b = b.normal.normalized();
+  m.d_b = b.d;
+  if (match.flip_curr) {  // (-n, -d) is the same plane; its covariance is unchanged
+    m.n_b = -m.n_b;
+    m.d_b = -m.d_b;
+  }
+  m.cov_a = PlaneCovarianceOrFallback(a, config.fallback_point_sigma) * config.covariance_scale;
+  m.cov_b = PlaneCovarianceOrFallback(b, config.fallback_point_sigma) * config.covariance_scale;
+  m.tangent = TangentBasis(m.n_a);
+  return true;
+}
+
+Linearized Linearize(const MatchData& m, const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                     const RegistrationConfig& config) {
+  Linearized lin;
+  const Eigen::Vector3d n_pred = R * m.n_b;
+  const Eigen::Matrix<double, 2, 3> ut = m.tangent.transpose();
+  // Residual of the measured plane in prev against the current plane moved into prev
+  // (geometry.hpp): r = [U^T (n_a - R n_b); d_a - d_b - (R n_b).t]. The normal part is taken in
+  // the tangent plane of n_a (2 dof) because the plane covariances are rank 3.
+  lin.r.head<2>() = ut * (m.n_a - n_pred);
+  lin.r(2) = m.d_a - m.d_b - n_pred.dot(t);
+  // With R <- Exp(dtheta) R: R n_b <- R n_b - [R n_b]_x dtheta; with t <- t + dt.
+  lin.J.setZero();
+  lin.J.block<2, 3>(0, 3) = ut * Skew(n_pred);
+  lin.J.block<1, 3>(2, 0) = -n_pred.transpose();
+  lin.J.block<1, 3>(2, 3) = t.transpose() * Skew(n_pred);
+  // Residual covariance: Sigma_a + J_b Sigma_b J_b^T (first order), projected on the residual
+  // basis B = diag(U, 1), plus the configured floors for both planes.
+  Pose T = Pose::Identity();
+  T.linear() = R;
+  T.translation() = t;
+  const Eigen::Matrix4d jb = TransformPlaneJacobian(T);
+  const Eigen::Matrix4d s = m.cov_a + jb * m.cov_b * jb.transpose();
+  Eigen::Matrix<double, 4, 3> b = Eigen::Matrix<double, 4, 3>::Zero();
+  b.topLeftCorner<3, 2>() = m.tangent;
+  b(3, 2) = 1.0;
+  Eigen::Matrix3d sr = b.transpose() * s * b;
+  const double fn2 = config.min_normal_sigma * config.min_normal_sigma;
+  const double fd2 = config.min_offset_sigma * config.min_offset_sigma;
+  sr += Eigen::Vector3d(2 * fn2, 2 * fn2, 2 * fd2).asDiagonal();
+  sr = 0.5 * (sr + sr.transpose());
+  // A tiny absolute floor keeps noise-free planes (zero covariance) invertible; it only sets
+  // the weights, the exact solution does not depend on it.
+  sr += Eigen::Matrix3d::Identity() * 1e-18;
+  lin.cov = sr;
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
+  es.computeDirect(sr);
+  const Eigen::Vector3d ev = es.eigenvalues().cwiseMax(1e-18);
+  lin.W = es.eigenvectors() * ev.cwiseInverse().asDiagonal() * es.eigenvectors().transpose();
+  return lin;
+}
+
+}  // namespace internal
+
+namespace {
+
+using internal::Linearized;
+using internal::MatchData;
+
+/// Splits R^3 into the eigen-directions of an information matrix H that are determined to better
+/// than max_sigma (observable) and the rest (degenerate).
+void SplitDirections(const Eigen::Matrix3d& H, double max_sigma, double min_ratio,
+                     std::vector<Eigen::Vector3d>* observable,
+                     std::vector<Eigen::Vector3d>* degenerate) {
+  if (!H.allFinite()) {
+    for (int k = 0; k < 3; ++k) degenerate->push_back(Eigen::Vector3d::Unit(k));
+    return;
+  }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(0.5 * (H + H.transpose()));
+  const Eigen::Vector3d lam = es.eigenvalues();
+  const double threshold = std::max(min_ratio * lam(2), 1.0 / (max_sigma * max_sigma));
+  // Descending order so the best-determined direction comes first.
+  for (int k = 2; k >= 0; --k) {
+    if (lam(2) > 0 && lam(k) > threshold) {
+      observable->push_back(es.eigenvectors().col(k));
+    } else {
+      degenerate->push_back(es.eigenvectors().col(k));
+    }
+  }
+}
+
+Matrix6d SanitizedPriorCovariance(const MotionPrior& prior) {
+  Matrix6d c = 0.5 * (prior.covariance + prior.covariance.transpose());
+  Eigen::SelfAdjointEigenSolver<Matrix6d> es(c);
+  if (!c.allFinite() || es.info() != Eigen::Success || !(es.eigenvalues().minCoeff() > 0)) {
+    return MotionPrior().covariance;
+  }
+  return c;
+}
+
+struct Accumulated {
+  Matrix6d H = Matrix6d::Zero();
+  Vector6d g = Vector6d::Zero();
+  double chi2 = 0.0;
+  double sum_sq_offset = 0.0;
+  double sum_sq_angle = 0.0;
+};
+
+Accumulated Accumulate(const std::vector<MatchData>& data, const Eigen::Matrix3d& R,
+                       const Eigen::Vector3d& t, const RegistrationConfig& config) {
+  Accumulated acc;
+  for (const MatchData& m : data) {
+    const Linearized lin = internal::Linearize(m, R, t, config);
+    const Eigen::Matrix<double, 6, 3> jtw = lin.J.transpose() * lin.W;
+    acc.H.noalias() += jtw * lin.J;
+    acc.g.noalias() += jtw * lin.r;
+    acc.chi2 += lin.r.dot(lin.W * lin.r);
+    acc.sum_sq_offset += lin.r(2) * lin.r(2);
+    const double c = std::clamp(m.n_a.dot(R * m.n_b), -1.0, 1.0);
+    acc.sum_sq_angle += std::acos(c) * std::acos(c);
+  }
+  acc.H = 0.5 * (acc.H + acc.H.transpose());
+  return acc;
+}
+
+Pose MakePose(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
+  Pose T = Pose::Identity();
+  T.linear() = R;
+  T.translation() = t;
+  return T;
+}
+
+}  // namespace
+
+RegistrationResult RegisterPlanes(const std::vector<detection::Plane>& prev,
+                                  const std::vector<detection::Plane>& curr,
+                                  const std::vector<PlaneMatch>& matches, const MotionPrior& prior,
+                                  const RegistrationConfig& config) {
+  const Matrix6d prior_cov = SanitizedPriorCovariance(prior);
+  Pose prior_pose = prior.T_prev_curr;
+  if (!prior_pose.matrix().allFinite()) prior_pose = Pose::Identity();
+  // Re-orthonormalise the prior rotation so Exp/Log stay exact.
+  prior_pose.linear() = Eigen::Quaterniond(prior_pose.linear()).normalized().toRotationMatrix();
+
+  // The answer when nothing can be determined: the prior, everything degenerate.
+  RegistrationResult fallback;
+  fallback.T_prev_curr = prior_pose;
+  fallback.covariance = prior_cov;
+  fallback.degenerate = true;
+  fallback.used_prior = true;
+  for (int k = 0; k < 6; ++k) fallback.degenerate_directions.push_back(Vector6d::Unit(k));
+
+  std::vector<MatchData> data;
+  data.reserve(matches.size());
+  for (const PlaneMatch& match : matches) {
+    MatchData m;
+    if (internal::MakeMatchData(prev, curr, match, config, &m)) data.push_back(m);
+  }
+  if (data.empty()) return fallback;
+
+  Eigen::Matrix3d R = prior_pose.linear();
+  Eigen::Vector3d t = prior_pose.translation();
+
+  // 1. Observability, from the measured normals in prev (independent of the motion estimate),
+  // weighted by the residual covariances at the prior. Rotation is seen only through normals,
+  // translation only through offsets along the normals.
+  Eigen::Matrix3d h_rot = Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d h_trans = Eigen::Matrix3d::Zero();
+  std::vector<double> w_normal(data.size());
+  for (std::size_t i = 0; i < data.size(); ++i) {
+    const MatchData& m = data[i];
+    const Linearized lin = internal::Linearize(m, R, t, config);
+    const Eigen::Matrix2d wn = lin.cov.topLeftCorner<2, 2>().inverse();
+    const Eigen::Matrix<double, 2, 3> jr = m.tangent.transpose() * Skew(m.n_a);
+    h_rot += jr.transpose() * wn * jr;
+    h_trans += m.n_a * m.n_a.transpose() / lin.cov(2, 2);
+    w_normal[i] = 2.0 / lin.cov.topLeftCorner<2, 2>().trace();
+  }
+  std::vector<Eigen::Vector3d> obs_t, null_t, obs_r, null_r;
+  SplitDirections(h_trans, config.max_translation_sigma, config.min_eigen_ratio, &obs_t, &null_t);
+  SplitDirections(h_rot, config.max_rotation_sigma, config.min_eigen_ratio, &obs_r, &null_r);
+
+  // 2. Rotation in closed form: maximise sum w n_a^T R n_b, i.e. R = U diag(1,1,det) V^T from
+  // the SVD of M = sum w n_a n_b^T (weighted Kabsch; the determinant fix keeps a proper rotation
+  // and also settles the rank-2 case of exactly two distinct normals).
+  if (null_r.empty()) {
+    Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
+    for (std::size_t i = 0; i < data.size(); ++i) {
+      M += w_normal[i] * data[i].n_a * data[i].n_b.transpose();
+    }
+    Eigen::JacobiSVD<Eigen::Matrix3d> svd(M, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
+    D(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
+    const Eigen::Matrix3d r_svd = svd.matrixU() * D * svd.matrixV().transpose();
+    if (r_svd.allFinite()) R = r_svd;
+  } else if (null_r.size() == 1) {
+    // All normals (anti)parallel: rotate the prior minimally so the best plane lines up; the
+    // rotation about that normal stays the prior's.
+    const std::size_t best =
+        std::max_element(w_normal.begin(), w_normal.end()) - w_normal.begin();
+    const Eigen::Quaterniond q =
+        Eigen::Quaterniond::FromTwoVectors(R * data[best].n_b, data[best].n_a);
+    if (q.coeffs().allFinite()) R = q.toRotationMatrix() * R;
+  }
+
+  // 6x6 bases of the observable and degenerate subspaces (pure translation / pure rotation).
+  Eigen::MatrixXd O(6, obs_t.size() + obs_r.size());
+  Eigen::MatrixXd N(6, null_t.size() + null_r.size());
+  O.setZero();
+  N.setZero();
+  {
+    int k = 0;
+    for (const auto& v : obs_t) O.col(k++).head<3>() = v;
+    for (const auto& v : obs_r) O.col(k++).tail<3>() = v;
+    k = 0;
+    for (const auto& v : null_t) N.col(k++).head<3>() = v;
+    for (const auto& v : null_r) N.col(k++).tail<3>() = v;
+  }
+
+  // 3. Translation by weighted least squares on the offsets, only along the observable
+  // translation directions; the degenerate ones keep the prior's value:
+  // minimise sum w (d_a - d_b - m.(t0 + O_t y))^2 with m = R n_b.
+  if (!obs_t.empty()) {
+    Eigen::MatrixXd ot(3, obs_t.size());
+    for (std::size_t k = 0; k < obs_t.size(); ++k) ot.col(k) = obs_t[k];
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d b = Eigen::Vector3d::Zero();
+    for (const MatchData& m : data) {
+      const Linearized lin = internal::Linearize(m, R, t, config);
+      const Eigen::Vector3d n_pred = R * m.n_b;
+      const double w = 1.0 / lin.cov(2, 2);
+      A += w * n_pred * n_pred.transpose();
+      b += w * n_pred * (m.d_a - m.d_b - n_pred.dot(t));
+    }
+    const Eigen::MatrixXd a_red = ot.transpose() * A * ot;
+    const Eigen::VectorXd y = a_red.ldlt().solve(ot.transpose() * b);
+    if (y.allFinite()) t += ot * y;
+  }
+
+  // 4. Gauss-Newton over all matched planes, restricted to the observable subspace.
+  RegistrationResult res;
+  res.converged = config.max_iterations == 0;
+  Accumulated acc = Accumulate(data, R, t, config);
+  if (O.cols() > 0) {
+    for (int it = 0; it < config.max_iterations; ++it) {
+      const Eigen::MatrixXd h_red = O.transpose() * acc.H * O;
+      const Eigen::VectorXd y = h_red.ldlt().solve(-O.transpose() * acc.g);
+      if (!y.allFinite()) break;
+      const Vector6d delta = O * y;
+      const Pose T_new = BoxPlus(MakePose(R, t), delta);
+      const Accumulated acc_new = Accumulate(data, T_new.linear(), T_new.translation(), config);
+      res.iterations = it + 1;
+      if (!(acc_new.chi2 <= acc.chi2 * (1.0 + 1e-12) + 1e-300)) {
+        // Not a descent step: we are at the minimum to numerical precision.
+        res.converged = true;
+        break;
+      }
+      R = T_new.linear();
+      t = T_new.translation();
+      acc = acc_new;
+      if (delta.norm() < config.convergence_step) {
+        res.converged = true;
+        break;
+      }
+    }
+  } else {
+    res.converged = true;  // nothing to estimate from the planes: the prior is the answer
+  }
+
+  // 5. Covariance: the planes' inverse information in the observable subspace, the prior's
+  // marginal in the degenerate one (they are uncorrelated to first order: a degenerate direction
+  // does not move any plane residual).
+  Matrix6d cov = Matrix6d::Zero();
+  if (O.cols() > 0) {
+    const Eigen::MatrixXd h_red = O.transpose() * acc.H * O;
+    cov += O * h_red.ldlt().solve(Eigen::MatrixXd::Identity(O.cols(), O.cols())) * O.transpose();
+  }
+  if (N.cols() > 0) cov += N * (N.transpose() * prior_cov * N) * N.transpose();
+  cov = 0.5 * (cov + cov.transpose());
+
+  res.T_prev_curr = MakePose(R, t);
+  res.covariance = cov;
+  res.information = acc.H;
+  res.degenerate = N.cols() > 0;
+  res.used_prior = N.cols() > 0;
+  for (int k = 0; k < N.cols(); ++k) res.degenerate_directions.push_back(N.col(k));
+  for (const MatchData& m : data) res.inliers.push_back(m.match);
+  const double count = static_cast<double>(data.size());
+  res.residual_rms = std::sqrt(acc.sum_sq_offset / count);
+  res.normal_residual_rms = std::sqrt(acc.sum_sq_angle / count);
+  res.chi2 = acc.chi2;
+
+  if (!res.T_prev_curr.matrix().allFinite() || !res.covariance.allFinite() ||
+      !res.information.allFinite() || !std::isfinite(res.chi2)) {
+    return fallback;
+  }
+  return res;
+}
+
+std::vector<double> PlaneMatchChi2(const std::vector<detection::Plane>& prev,
+                                   const std::vector<detection::Plane>& curr,
+                                   const std::vector<PlaneMatch>& matches, const Pose& T_prev_curr,
+                                   const RegistrationConfig& config) {
+  std::vector<double> out;
+  out.reserve(matches.size());
+  for (const PlaneMatch& match : matches) {
+    MatchData m;
+    if (!internal::MakeMatchData(prev, curr, match, config, &m)) {
+      out.push_back(std::numeric_limits<double>::infinity());
+      continue;
+    }
+    const Linearized lin =
+        internal::Linearize(m, T_prev_curr.linear(), T_prev_curr.translation(), config);
+    out.push_back(lin.r.dot(lin.W * lin.r));
+  }
+  return out;
+}
+
+}  // namespace planeslam::registration
