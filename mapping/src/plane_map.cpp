@@ -1,0 +1,532 @@
+#include "planeslam/mapping/plane_map.hpp"
+
+#include <Eigen/Eigenvalues>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <utility>
+
+#include "planeslam/datasets/errors.hpp"
+
+namespace planeslam::mapping {
+namespace {
+
+constexpr double kDegToRad = M_PI / 180.0;
+/// An extent's basis is rebuilt when the plane's normal has turned by more than this since: the
+/// in-plane coordinates of a point 10 m away then shift by less than 10 m * (1 - cos 1 deg) = 1.5 mm.
+constexpr double kExtentRebuildAngleDeg = 1.0;
+
+std::int64_t CellKey(std::int64_t i, std::int64_t j) {
+  return (i << 32) ^ static_cast<std::int64_t>(static_cast<std::uint32_t>(j));
+}
+
+std::int64_t FloorIndex(double x, double cell) {
+  return static_cast<std::int64_t>(std::floor(x / cell));
+}
+
+/// Mean point per cell of a grid on the plane (basis) of the points; deterministic order (by cell).
+std::vector<Eigen::Vector3f> GridSamples(const std::vector<Eigen::Vector3f>& points,
+                                         const PlaneBasis& basis, double cell) {
+  std::map<std::pair<std::int64_t, std::int64_t>, std::pair<Eigen::Vector3d, int>> cells;
+  for (const auto& pf : points) {
+    if (!pf.allFinite()) continue;
+    const Eigen::Vector3d p = pf.cast<double>();
+    const Eigen::Vector2d xy = basis.Project(p);
+    auto& c = cells[{FloorIndex(xy.x(), cell), FloorIndex(xy.y(), cell)}];
+    if (c.second == 0) c.first.setZero();
+    c.first += p;
+    ++c.second;
+  }
+  std::vector<Eigen::Vector3f> samples;
+  samples.reserve(cells.size());
+  for (const auto& [key, c] : cells) samples.push_back((c.first / c.second).cast<float>());
+  return samples;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// PointStats
+
+PointStats PointStats::FromMoments(const detection::PlaneMoments& moments) {
+  PointStats s;
+  s.count = moments.count();
+  if (s.count == 0) return s;
+  s.centroid = moments.Centroid();
+  s.scatter = moments.Scatter();
+  return s;
+}
+
+PointStats PointStats::Transformed(const Pose& T) const {
+  PointStats s;
+  s.count = count;
+  const Eigen::Matrix3d R = T.linear();
+  s.centroid = R * centroid + T.translation();
+  s.scatter = R * scatter * R.transpose();
+  s.scatter = 0.5 * (s.scatter + s.scatter.transpose());  // keep exactly symmetric
+  return s;
+}
+
+void PointStats::Merge(const PointStats& other) {
+  if (other.count == 0) return;
+  if (count == 0) {
+    *this = other;
+    return;
+  }
+  const double k1 = static_cast<double>(count);
+  const double k2 = static_cast<double>(other.count);
+  const double k = k1 + k2;
+  const Eigen::Vector3d delta = other.centroid - centroid;
+  scatter += other.scatter + (k1 * k2 / k) * delta * delta.transpose();
+  centroid += (k2 / k) * delta;
+  count += other.count;
+}
+
+detection::PlaneFit PointStats::Fit(const Eigen::Vector3d& orientation) const {
+  detection::PlaneFit fit;
+  fit.centroid = centroid;
+  if (count < 3) return fit;
+  // The iterative solver rather than computeDirect: map planes are few, and its accuracy keeps a
+  // rigidly moved map equal to the moved fit to ~1e-12.
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(scatter);
+  fit.eigenvalues = solver.eigenvalues().cwiseMax(0.0);
+  Eigen::Vector3d n = solver.eigenvectors().col(0).normalized();
+  if (n.dot(orientation) < 0) n = -n;
+  fit.normal = n;
+  fit.d = n.dot(centroid);
+  fit.mse = fit.eigenvalues(0) / static_cast<double>(count);
+  fit.valid = n.allFinite();
+  return fit;
+}
+
+// ---------------------------------------------------------------------------------------------
+// PlaneMapConfig
+
+std::vector<std::string> PlaneMapConfig::Validate() const {
+  std::vector<std::string> problems;
+  auto need = [&](bool ok, const std::string& what) {
+    if (!ok) problems.push_back(what);
+  };
+  need(max_normal_angle_deg > 0 && max_normal_angle_deg < 90,
+       "max_normal_angle_deg must be in (0, 90)");
+  need(max_offset > 0, "max_offset must be > 0");
+  need(max_gap >= 0, "max_gap must be >= 0");
+  need(min_touch_points >= 1, "min_touch_points must be >= 1");
+  need(merge_max_normal_angle_deg > 0 && merge_max_normal_angle_deg < 90,
+       "merge_max_normal_angle_deg must be in (0, 90)");
+  need(merge_max_offset > 0, "merge_max_offset must be > 0");
+  need(min_observation_points >= 3, "min_observation_points must be >= 3");
+  need(sample_cell_size > 0, "sample_cell_size must be > 0");
+  need(max_samples_per_observation >= 16, "max_samples_per_observation must be >= 16");
+  for (const auto& p : polygon.Validate()) problems.push_back("polygon: " + p);
+  return problems;
+}
+
+// ---------------------------------------------------------------------------------------------
+// PlaneMap
+
+PlaneMap::PlaneMap(const PlaneMapConfig& config) : config_(config) {
+  const auto problems = config_.Validate();
+  PLANESLAM_CHECK(problems.empty(), "invalid PlaneMapConfig: " << problems.front());
+}
+
+PlaneObservation PlaneMap::MakeObservation(std::int64_t keyframe_id,
+                                           const detection::Plane& plane,
+                                           const std::vector<Eigen::Vector3f>* points) const {
+  PlaneObservation obs;
+  obs.keyframe_id = keyframe_id;
+  obs.detection_id = plane.id;
+  obs.stats_sensor = PointStats::FromMoments(plane.moments);
+  obs.normal_sensor = plane.normal.normalized();
+  const detection::PlaneFit fit = obs.stats_sensor.Fit(obs.normal_sensor);
+  const PlaneBasis basis = MakePlaneBasis(fit.normal, fit.d);
+
+  if (points && !points->empty()) {
+    // Doubling the cell until the samples fit keeps the memory per observation bounded whatever the
+    // plane's size; the outline's accuracy is set by the polygon cell anyway.
+    double cell = config_.sample_cell_size;
+    for (;;) {
+      obs.samples_sensor = GridSamples(*points, basis, cell);
+      if (static_cast<int>(obs.samples_sensor.size()) <= config_.max_samples_per_observation) break;
+      cell *= 2.0;
+    }
+  }
+  if (obs.samples_sensor.empty()) {
+    // No points given: a point set spread uniformly over [-a, a] has variance a^2 / 3, so the
+    // rectangle with half-sides sqrt(3 lambda / K) along the two in-plane principal axes has the
+    // plane's second moments.
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(obs.stats_sensor.scatter);
+    const double k = static_cast<double>(std::max<std::int64_t>(obs.stats_sensor.count, 1));
+    const Eigen::Vector3d e1 = solver.eigenvectors().col(1);
+    const Eigen::Vector3d e2 = solver.eigenvectors().col(2);
+    const double a1 = std::sqrt(3.0 * std::max(solver.eigenvalues()(1), 0.0) / k);
+    const double a2 = std::sqrt(3.0 * std::max(solver.eigenvalues()(2), 0.0) / k);
+    double cell = config_.sample_cell_size;
+    while ((2 * a1 / cell + 1) * (2 * a2 / cell + 1) > config_.max_samples_per_observation) {
+      cell *= 2.0;
+    }
+    const int n1 = static_cast<int>(std::floor(a1 / cell));
+    const int n2 = static_cast<int>(std::floor(a2 / cell));
+    for (int i = -n1; i <= n1; ++i) {
+      for (int j = -n2; j <= n2; ++j) {
+        obs.samples_sensor.push_back(
+            (obs.stats_sensor.centroid + (i * cell) * e1 + (j * cell) * e2).cast<float>());
+      }
+    }
+  }
+  return obs;
+}
+
+std::vector<Eigen::Vector3d> PlaneMap::WorldSamples(const MapPlane& plane) const {
+  std::vector<Eigen::Vector3d> out;
+  for (const auto& obs : plane.observations) {
+    const Pose& T = KeyframePose(obs.keyframe_id);
+    for (const auto& s : obs.samples_sensor) out.push_back(T * s.cast<double>());
+  }
+  return out;
+}
+
+void PlaneMap::RefitPlane(MapPlane& plane) const {
+  PointStats world;
+  Eigen::Vector3d orientation = Eigen::Vector3d::Zero();
+  plane.first_keyframe = std::numeric_limits<std::int64_t>::max();
+  plane.last_keyframe = std::numeric_limits<std::int64_t>::min();
+  for (const auto& obs : plane.observations) {
+    const Pose& T = KeyframePose(obs.keyframe_id);
+    world.Merge(obs.stats_sensor.Transformed(T));
+    // Count-weighted sum of the observed normals: the sign reference of the fit, so the map normal
+    // keeps pointing away from the sensors whatever the eigen solver's sign.
+    orientation += static_cast<double>(obs.stats_sensor.count) * (T.linear() * obs.normal_sensor);
+    plane.first_keyframe = std::min(plane.first_keyframe, obs.keyframe_id);
+    plane.last_keyframe = std::max(plane.last_keyframe, obs.keyframe_id);
+  }
+  plane.stats_world = world;
+  const detection::PlaneFit fit = world.Fit(orientation);
+  plane.normal = fit.normal;
+  plane.d = fit.d;
+  plane.centroid = fit.centroid;
+  plane.mse = fit.mse;
+}
+
+void PlaneMap::AddToExtent(Extent& extent, const std::vector<Eigen::Vector3d>& world_points) const {
+  const double coarse = config_.max_gap + extent.cell;
+  for (const auto& p : world_points) {
+    const Eigen::Vector2d xy = extent.basis.Project(p);
+    extent.fine.insert(CellKey(FloorIndex(xy.x(), extent.cell), FloorIndex(xy.y(), extent.cell)));
+    extent.coarse.insert(CellKey(FloorIndex(xy.x(), coarse), FloorIndex(xy.y(), coarse)));
+  }
+}
+
+void PlaneMap::RebuildExtent(const MapPlane& plane) {
+  Extent& extent = extents_[IndexOf(plane.id)];
+  extent = Extent();
+  extent.basis = MakePlaneBasis(plane.normal, plane.d);
+  extent.cell = config_.sample_cell_size;
+  AddToExtent(extent, WorldSamples(plane));
+}
+
+int PlaneMap::CountTouching(const Extent& extent, const std::vector<Eigen::Vector3d>& world_points,
+                            int enough) const {
+  // A point touches the extent when an occupied cell's centre lies within max_gap plus half a cell
+  // diagonal of it. The coarse cells have that radius as size, so a 3x3 coarse neighbourhood holds
+  // every candidate and most points are rejected with 9 hash look-ups.
+  const double radius = config_.max_gap + extent.cell * M_SQRT1_2;
+  const double coarse = config_.max_gap + extent.cell;
+  const int r = static_cast<int>(std::ceil(radius / extent.cell));
+  int touching = 0;
+  for (const auto& p : world_points) {
+    const Eigen::Vector2d xy = extent.basis.Project(p);
+    const std::int64_t ci = FloorIndex(xy.x(), coarse);
+    const std::int64_t cj = FloorIndex(xy.y(), coarse);
+    bool near_coarse = false;
+    for (int di = -1; di <= 1 && !near_coarse; ++di) {
+      for (int dj = -1; dj <= 1 && !near_coarse; ++dj) {
+        near_coarse = extent.coarse.count(CellKey(ci + di, cj + dj)) != 0;
+      }
+    }
+    if (!near_coarse) continue;
+    const std::int64_t fi = FloorIndex(xy.x(), extent.cell);
+    const std::int64_t fj = FloorIndex(xy.y(), extent.cell);
+    bool near = false;
+    for (int di = -r; di <= r && !near; ++di) {
+      for (int dj = -r; dj <= r && !near; ++dj) {
+        const Eigen::Vector2d centre((fi + di + 0.5) * extent.cell, (fj + dj + 0.5) * extent.cell);
+        if ((centre - xy).norm() > radius) continue;
+        near = extent.fine.count(CellKey(fi + di, fj + dj)) != 0;
+      }
+    }
+    if (near && ++touching >= enough) return touching;
+  }
+  return touching;
+}
+
+bool PlaneMap::Coincide(const MapPlane& a, const MapPlane& b) const {
+  if (a.normal.dot(b.normal) < std::cos(config_.merge_max_normal_angle_deg * kDegToRad)) {
+    return false;
+  }
+  if (std::abs(a.normal.dot(b.centroid) - a.d) > config_.merge_max_offset) return false;
+  if (std::abs(b.normal.dot(a.centroid) - b.d) > config_.merge_max_offset) return false;
+  // Touching: b's occupied cells (as world points) near a's extent.
+  const Extent& eb = extents_[IndexOf(b.id)];
+  std::vector<Eigen::Vector3d> cells;
+  cells.reserve(eb.fine.size());
+  for (const std::int64_t key : eb.fine) {
+    const std::int64_t i = key >> 32;
+    const std::int64_t j = static_cast<std::int32_t>(key & 0xffffffff);
+    cells.push_back(eb.basis.Unproject(
+        Eigen::Vector2d((static_cast<double>(i) + 0.5) * eb.cell,
+                        (static_cast<double>(j) + 0.5) * eb.cell)));
+  }
+  std::sort(cells.begin(), cells.end(), [](const Eigen::Vector3d& x, const Eigen::Vector3d& y) {
+    return std::lexicographical_compare(x.data(), x.data() + 3, y.data(), y.data() + 3);
+  });  // deterministic order whatever the hash set's
+  const int need = std::min<int>(config_.min_touch_points, static_cast<int>(cells.size()));
+  return need > 0 && CountTouching(extents_[IndexOf(a.id)], cells, need) >= need;
+}
+
+std::size_t PlaneMap::IndexOf(int id) const {
+  for (std::size_t i = 0; i < planes_.size(); ++i) {
+    if (planes_[i].id == id) return i;
+  }
+  PLANESLAM_CHECK(false, "no map plane with id " << id);
+  return 0;
+}
+
+void PlaneMap::MergeInto(std::size_t i, std::size_t j) {
+  PLANESLAM_CHECK(i != j && i < planes_.size() && j < planes_.size(), "bad merge indices");
+  MapPlane& keep = planes_[i];
+  MapPlane& gone = planes_[j];
+  for (auto& obs : gone.observations) keep.observations.push_back(std::move(obs));
+  merged_into_[gone.id] = keep.id;
+  const int keep_id = keep.id;
+  planes_.erase(planes_.begin() + static_cast<std::ptrdiff_t>(j));
+  extents_.erase(extents_.begin() + static_cast<std::ptrdiff_t>(j));
+  MapPlane& merged = planes_[IndexOf(keep_id)];
+  RefitPlane(merged);
+  RebuildExtent(merged);
+}
+
+int PlaneMap::ResolveId(int id) const {
+  int current = id;
+  for (auto it = merged_into_.find(current); it != merged_into_.end();
+       it = merged_into_.find(current)) {
+    current = it->second;
+  }
+  for (const auto& p : planes_) {
+    if (p.id == current) return current;
+  }
+  return -1;
+}
+
+const MapPlane* PlaneMap::Find(int id) const {
+  const int current = ResolveId(id);
+  if (current < 0) return nullptr;
+  return &planes_[IndexOf(current)];
+}
+
+const Pose& PlaneMap::KeyframePose(std::int64_t keyframe_id) const {
+  const auto it = keyframe_poses_.find(keyframe_id);
+  PLANESLAM_CHECK(it != keyframe_poses_.end(), "unknown keyframe " << keyframe_id);
+  return it->second;
+}
+
+FrameAssociation PlaneMap::AddObservations(
+    std::int64_t keyframe_id, const Pose& T_world_sensor,
+    const std::vector<detection::Plane>& planes,
+    const std::vector<std::vector<Eigen::Vector3f>>& plane_points) {
+  PLANESLAM_CHECK(plane_points.empty() || plane_points.size() == planes.size(),
+                  "plane_points must be empty or have one entry per plane");
+  PLANESLAM_CHECK(T_world_sensor.matrix().allFinite(), "pose not finite");
+  if (const auto it = keyframe_poses_.find(keyframe_id); it != keyframe_poses_.end()) {
+    PLANESLAM_CHECK(it->second.isApprox(T_world_sensor, 1e-12),
+                    "keyframe " << keyframe_id << " added again with another pose (use Refit)");
+  } else {
+    keyframe_poses_[keyframe_id] = T_world_sensor;
+  }
+  const Pose& T = keyframe_poses_.at(keyframe_id);
+  const double cos_assoc = std::cos(config_.max_normal_angle_deg * kDegToRad);
+  const double cos_merge = std::cos(config_.merge_max_normal_angle_deg * kDegToRad);
+  const double cos_rebuild = std::cos(kExtentRebuildAngleDeg * kDegToRad);
+
+  FrameAssociation result;
+  result.map_ids.assign(planes.size(), -1);
+  for (std::size_t k = 0; k < planes.size(); ++k) {
+    const detection::Plane& plane = planes[k];
+    if (plane.moments.count() < config_.min_observation_points) continue;
+    if (!plane.normal.allFinite() || plane.normal.norm() < 0.5) continue;
+    PlaneObservation obs =
+        MakeObservation(keyframe_id, plane, plane_points.empty() ? nullptr : &plane_points[k]);
+    const PointStats world = obs.stats_sensor.Transformed(T);
+    const detection::PlaneFit fit = world.Fit(T.linear() * obs.normal_sensor);
+    if (!fit.valid) continue;
+    std::vector<Eigen::Vector3d> samples;
+    samples.reserve(obs.samples_sensor.size());
+    for (const auto& s : obs.samples_sensor) samples.push_back(T * s.cast<double>());
+
+    // Candidates, best (smallest offset) first.
+    std::vector<std::pair<double, int>> candidates;
+    const int need = std::min<int>(config_.min_touch_points, static_cast<int>(samples.size()));
+    for (std::size_t i = 0; i < planes_.size(); ++i) {
+      const MapPlane& m = planes_[i];
+      if (m.normal.dot(fit.normal) < cos_assoc) continue;
+      const double offset = std::abs(m.normal.dot(fit.centroid) - m.d);
+      if (offset > config_.max_offset) continue;
+      if (need == 0 || CountTouching(extents_[i], samples, need) < need) continue;
+      candidates.emplace_back(offset, m.id);
+    }
+    std::sort(candidates.begin(), candidates.end());
+
+    if (candidates.empty()) {
+      MapPlane m;
+      m.id = next_id_++;
+      m.observations.push_back(std::move(obs));
+      RefitPlane(m);
+      planes_.push_back(std::move(m));
+      extents_.emplace_back();
+      RebuildExtent(planes_.back());
+      result.map_ids[k] = planes_.back().id;
+      ++result.created;
+      continue;
+    }
+
+    const int best_id = candidates.front().second;
+    {
+      MapPlane& m = planes_[IndexOf(best_id)];
+      m.observations.push_back(std::move(obs));
+      // Incremental update of the fit (Refit recomputes from scratch with the same formulas).
+      m.stats_world.Merge(world);
+      const detection::PlaneFit mf = m.stats_world.Fit(m.normal);
+      m.normal = mf.normal;
+      m.d = mf.d;
+      m.centroid = mf.centroid;
+      m.mse = mf.mse;
+      m.first_keyframe = std::min(m.first_keyframe, keyframe_id);
+      m.last_keyframe = std::max(m.last_keyframe, keyframe_id);
+      Extent& e = extents_[IndexOf(best_id)];
+      if (m.normal.dot(e.basis.normal) < cos_rebuild) {
+        RebuildExtent(m);
+      } else {
+        AddToExtent(e, samples);
+      }
+      ++result.associated;
+    }
+    // The observation touches every candidate and lies on each: the candidates are one surface,
+    // provided the map planes also agree with each other within the (stricter) merge thresholds.
+    int survivor = best_id;
+    for (std::size_t c = 1; c < candidates.size(); ++c) {
+      const int other = candidates[c].second;
+      const MapPlane& a = planes_[IndexOf(survivor)];
+      const MapPlane& b = planes_[IndexOf(other)];
+      if (a.normal.dot(b.normal) < cos_merge) continue;
+      if (std::abs(a.normal.dot(b.centroid) - a.d) > config_.merge_max_offset ||
+          std::abs(b.normal.dot(a.centroid) - b.d) > config_.merge_max_offset) {
+        continue;
+      }
+      const int keep = std::min(survivor, other);
+      const int drop = std::max(survivor, other);
+      MergeInto(IndexOf(keep), IndexOf(drop));
+      survivor = keep;
+      ++result.merged;
+    }
+    result.map_ids[k] = survivor;
+  }
+  // Ids handed out earlier in this frame may have been merged away since.
+  for (int& id : result.map_ids) {
+    if (id > 0) id = ResolveId(id);
+  }
+  return result;
+}
+
+FrameAssociation PlaneMap::AddFrame(std::int64_t keyframe_id, const Pose& T_world_sensor,
+                                    const detection::Segmentation& segmentation,
+                                    const datasets::OrganizedCloud& cloud) {
+  PLANESLAM_CHECK(segmentation.labels.size() == cloud.size(),
+                  "label image (" << segmentation.labels.size() << ") and cloud (" << cloud.size()
+                                  << ") differ in size");
+  std::unordered_map<int, std::size_t> index_of_id;
+  for (std::size_t i = 0; i < segmentation.planes.size(); ++i) {
+    index_of_id[segmentation.planes[i].id] = i;
+  }
+  std::vector<std::vector<Eigen::Vector3f>> points(segmentation.planes.size());
+  for (std::size_t p = 0; p < cloud.size(); ++p) {
+    const int label = segmentation.labels[p];
+    if (label < 1 || !cloud.IsValid(p)) continue;
+    const auto it = index_of_id.find(label);
+    if (it != index_of_id.end()) points[it->second].push_back(cloud.points[p]);
+  }
+  return AddObservations(keyframe_id, T_world_sensor, segmentation.planes, points);
+}
+
+int PlaneMap::Refit(const std::unordered_map<std::int64_t, Pose>& T_world_keyframe) {
+  for (const auto& [id, pose] : T_world_keyframe) {
+    PLANESLAM_CHECK(pose.matrix().allFinite(), "pose of keyframe " << id << " not finite");
+    const auto it = keyframe_poses_.find(id);
+    if (it != keyframe_poses_.end()) it->second = pose;
+  }
+  for (auto& plane : planes_) RefitPlane(plane);
+  for (const auto& plane : planes_) RebuildExtent(plane);
+  return MergeCoincidentPlanes();
+}
+
+int PlaneMap::MergeCoincidentPlanes() {
+  int merges = 0;
+  bool changed = true;
+  while (changed) {
+    changed = false;
+    for (std::size_t i = 0; i < planes_.size() && !changed; ++i) {
+      for (std::size_t j = i + 1; j < planes_.size() && !changed; ++j) {
+        if (Coincide(planes_[i], planes_[j]) || Coincide(planes_[j], planes_[i])) {
+          const bool i_first = planes_[i].id < planes_[j].id;
+          MergeInto(i_first ? i : j, i_first ? j : i);
+          ++merges;
+          changed = true;
+        }
+      }
+    }
+  }
+  return merges;
+}
+
+MapPlaneOutline PlaneMap::Outline(const MapPlane& plane) const {
+  MapPlaneOutline out;
+  out.id = plane.id;
+  out.basis = MakePlaneBasis(plane.normal, plane.d);
+  std::vector<Eigen::Vector2d> xy;
+  for (const auto& p : WorldSamples(plane)) xy.push_back(out.basis.Project(p));
+  out.polygon = ConcaveHull(xy, config_.polygon);
+  {
+    const double cell =
+        out.polygon.cell_size > 0 ? out.polygon.cell_size : 2.0 * config_.sample_cell_size;
+    std::unordered_set<std::int64_t> occupied;
+    for (const auto& p : xy) occupied.insert(CellKey(FloorIndex(p.x(), cell), FloorIndex(p.y(), cell)));
+    std::int64_t boundary_edges = 0;
+    for (const std::int64_t key : occupied) {
+      const std::int64_t i = key >> 32;
+      const std::int64_t j = static_cast<std::int32_t>(key & 0xffffffff);
+      boundary_edges += (occupied.count(CellKey(i + 1, j)) == 0) + (occupied.count(CellKey(i - 1, j)) == 0) +
+                        (occupied.count(CellKey(i, j + 1)) == 0) + (occupied.count(CellKey(i, j - 1)) == 0);
+    }
+    // Boundary bias: the cell holding the outermost sample reaches cell/2 beyond it on average, and
+    // that sample (a mean over a sample cell cut by the true edge) lies sample_cell/4 inside the
+    // edge on average; so each boundary cell edge overshoots by cell/2 - sample_cell/4.
+    const double overshoot = 0.5 * cell - 0.25 * config_.sample_cell_size;
+    out.observed_area = static_cast<double>(occupied.size()) * cell * cell -
+                        static_cast<double>(boundary_edges) * cell * overshoot;
+    out.observed_area = std::max(out.observed_area, 0.0);
+  }
+  if (!out.polygon.valid) return out;
+  for (const auto& v : out.polygon.vertices) out.vertices.push_back(out.basis.Unproject(v));
+  out.triangles = TriangulatePolygon(out.polygon.vertices);
+  return out;
+}
+
+std::vector<MapPlaneOutline> PlaneMap::Outlines() const {
+  std::vector<MapPlaneOutline> out;
+  out.reserve(planes_.size());
+  for (const auto& p : planes_) out.push_back(Outline(p));
+  return out;
+}
+
+}  // namespace planeslam::mapping
