@@ -306,9 +306,11 @@ Eigen::AlignedBox3d SyntheticScene::Bounds() const {
     box.extend(s.center + Vector3d::Constant(s.radius));
   }
   for (const auto& c : cylinders) {
+    // The end disks' exact extent: radius * sqrt(1 - axis_i^2) along world axis i.
+    const Vector3d ext = (Vector3d::Ones() - c.axis.cwiseAbs2()).cwiseMax(0.0).cwiseSqrt() * c.radius;
     for (const Vector3d& e : {c.base, Vector3d(c.base + c.length * c.axis)}) {
-      box.extend(e - Vector3d::Constant(c.radius));
-      box.extend(e + Vector3d::Constant(c.radius));
+      box.extend(e - ext);
+      box.extend(e + ext);
     }
   }
   return box;

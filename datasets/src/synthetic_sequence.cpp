@@ -13,7 +13,7 @@ constexpr double kDeg = kPi / 180.0;
 
 // Oscillations per lap (loop) chosen not to be whole numbers, so the second pass near the start
 // sees the scene from a slightly different height/pitch/yaw: loop closure must match, not copy.
-constexpr double kYawCyclesPerLap = 3.1;
+constexpr double kYawCyclesPerLap = 2.1;
 constexpr double kPitchCyclesPerLap = 2.2;
 constexpr double kHeightCyclesPerLap = 1.3;
 constexpr double kRollCyclesPerLap = 4.3;
@@ -40,6 +40,7 @@ SyntheticTrajectoryConfig DefaultTrajectory(SceneKind kind) {
       c.kind = "line";
       c.center = Eigen::Vector3d(2.0, 0.0, 1.4);
       c.length = 10.0;
+      c.speed = 0.5;
       c.height_amplitude = 0.1;
       c.pitch_deg = -5.0;
       c.pitch_amplitude_deg = 5.0;

@@ -25,7 +25,7 @@ struct SyntheticTrajectoryConfig {
   std::string kind = "loop";  ///< "loop" or "line"
   int frames = 0;             ///< number of frames; 0 = enough for `laps` laps (or `length`)
   double rate = 30.0;         ///< frame rate [Hz]
-  double speed = 0.5;         ///< along the path [m/s]
+  double speed = 0.4;         ///< along the path [m/s]
   double laps = 1.5;          ///< loop: turns around the centre when frames = 0 [1]
   double length = 10.0;       ///< line: run length when frames = 0 [m]
   Eigen::Vector3d center = Eigen::Vector3d(0, 0, 1.4);  ///< loop centre / line start [m]
@@ -35,7 +35,7 @@ struct SyntheticTrajectoryConfig {
   std::string look = "outward";        ///< loop: "outward", "inward" or "forward" (tangent)
   double pitch_deg = -10.0;            ///< mean pitch (negative = down) [deg]
   double pitch_amplitude_deg = 8.0;    ///< [deg]
-  double yaw_amplitude_deg = 30.0;     ///< looking left and right around the heading [deg]
+  double yaw_amplitude_deg = 20.0;     ///< looking left and right around the heading [deg]
   double roll_amplitude_deg = 3.0;     ///< [deg]
 };
 
