@@ -1,13 +1,10 @@
 // Config sections owned by the app layer itself.
+#include "config_sections_app.hpp"
+
 #include "config.hpp"
 
 namespace planeslam::app {
 namespace {
-
-/// Where outputs go and how much is written.
-struct OutputConfig {
-  std::string directory = "planeslam_out";  ///< default output folder of `run`
-};
 
 void VisitOutput(FieldVisitor& v, OutputConfig& c) {
   v.Field("directory", c.directory, "default output folder of 'planeslam run' when --out is not given", {});

@@ -1,0 +1,65 @@
+// Config sections of the SLAM pipeline: "slam" (keyframes, loop closures) and "run" (what
+// `planeslam run` feeds it and writes).
+#include "config_sections_slam.hpp"
+
+namespace planeslam::app {
+namespace {
+
+void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
+  v.Field("keyframe_translation", c.keyframe_translation,
+          "[m] new keyframe after this motion since the last one", 0.001, 100.0);
+  v.Field("keyframe_rotation_deg", c.keyframe_rotation_deg,
+          "[deg] new keyframe after this rotation since the last one", 0.01, 180.0);
+  v.Field("keyframe_min_matches", c.keyframe_min_matches,
+          "[planes] new keyframe when fewer planes match the keyframe", 0, 100);
+  v.Field("prior_translation_sigma", c.prior_translation_sigma,
+          "[m] 1-sigma of the constant-velocity prediction per frame", 1e-6, 100.0);
+  v.Field("prior_rotation_sigma", c.prior_rotation_sigma,
+          "[rad] 1-sigma of the constant-velocity prediction per frame", 1e-6, 10.0);
+  v.Field("loop_closure", c.loop_closure, "search and verify loop closures");
+  v.Field("loop_search_radius", c.loop_search_radius,
+          "[m] loop candidates are keyframes within this distance", 0.0, 1000.0);
+  v.Field("loop_max_angle_deg", c.loop_max_angle_deg,
+          "[deg] and within this viewing-direction difference", 0.0, 180.0);
+  v.Field("loop_min_keyframe_gap", c.loop_min_keyframe_gap,
+          "[keyframes] loop candidates are at least this much older", 1, 1000000);
+  v.Field("loop_max_candidates", c.loop_max_candidates,
+          "[keyframes] candidates verified per new keyframe, nearest first", 0, 100);
+  v.Field("loop_min_matches", c.loop_min_matches,
+          "[planes] consistent plane matches a verified closure needs", 3, 100);
+  v.Field("loop_max_residual", c.loop_max_residual,
+          "[m] RMS plane-offset residual of a verified closure", 0.0, 10.0);
+  v.Field("loop_prior_translation_sigma", c.loop_prior_translation_sigma,
+          "[m] assumed drift (1-sigma) of the relative pose to a loop candidate", 1e-6, 100.0);
+  v.Field("loop_prior_rotation_sigma", c.loop_prior_rotation_sigma,
+          "[rad] same for rotation", 1e-6, 10.0);
+}
+
+std::vector<std::string> ValidateSlam(const mapping::SlamConfig& c) { return c.Validate(); }
+
+void VisitRun(FieldVisitor& v, RunConfig& c) {
+  v.Field("method", c.method, "plane detector used by 'run' (see 'planeslam detect --help')", {});
+  v.Field("start_at_ground_truth", c.start_at_ground_truth,
+          "anchor the first pose at the ground truth's (when known) instead of the identity");
+  v.Field("octomap", c.octomap, "write octomap.bt (needs a build with OctoMap)");
+  v.Field("octomap_resolution", c.octomap_resolution, "[m] OctoMap voxel size", 0.005, 10.0);
+  v.Field("octomap_max_range", c.octomap_max_range,
+          "[m] rays longer than this are cut (protects floors seen at grazing angles)", 0.1,
+          1000.0);
+  v.Field("octomap_downsample", c.octomap_downsample,
+          "[m] voxel size the keyframe clouds are thinned to before insertion", 0.0, 10.0);
+  v.Field("max_frames", c.max_frames, "[frames] stop after this many frames (0 = all)", 0,
+          100000000);
+  v.Field("frame_stride", c.frame_stride, "[frames] use every n-th frame", 1, 1000);
+  v.Field("ate_max_time_difference", c.ate_max_time_difference,
+          "[s] evo's association window when scoring against ground truth", 0.0, 10.0);
+}
+
+PLANESLAM_REGISTER_CONFIG_SECTION(mapping::SlamConfig, "slam",
+                                  "SLAM back end: keyframes and loop closures", &VisitSlam,
+                                  &ValidateSlam);
+PLANESLAM_REGISTER_CONFIG_SECTION(RunConfig, "run", "planeslam run: inputs and optional outputs",
+                                  &VisitRun);
+
+}  // namespace
+}  // namespace planeslam::app

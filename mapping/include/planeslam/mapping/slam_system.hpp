@@ -1,0 +1,140 @@
+#pragma once
+/// Offline plane SLAM: frame-to-keyframe plane tracking, a keyframe pose graph with verified loop
+/// closures, and the global plane map.
+///
+/// Per frame: the detector's planes are associated with the current keyframe's planes (prior:
+/// constant velocity) and registered in closed form (registration module). The pose of a frame is
+/// kept relative to its keyframe (T_kf_frame), so every frame follows its keyframe when the graph
+/// is optimised. A new keyframe starts when the motion since the keyframe passes a threshold or the
+/// planes shared with it get few; it adds a node, an odometry edge weighted by the registration's
+/// covariance, its planes to the map, and a loop-closure search: nearby keyframes (by the current
+/// estimate) that are not recent are registered against it with the estimated relative pose as
+/// prior; only a non-degenerate, consistent, small-residual registration enters the graph (with a
+/// robust loss), after which the graph is optimised and the map re-fitted.
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "planeslam/datasets/organized_cloud.hpp"
+#include "planeslam/datasets/trajectory.hpp"
+#include "planeslam/detection/plane.hpp"
+#include "planeslam/mapping/plane_map.hpp"
+#include "planeslam/mapping/pose_graph.hpp"
+#include "planeslam/registration/plane_association.hpp"
+#include "planeslam/registration/plane_registration.hpp"
+
+namespace planeslam::mapping {
+
+/// Keyframe and loop-closure settings (YAML section "slam").
+struct SlamConfig {
+  double keyframe_translation = 0.20;  ///< [m] new keyframe after this motion since the last one
+  double keyframe_rotation_deg = 12.0;  ///< [deg] same for rotation
+  int keyframe_min_matches = 3;  ///< [planes] new keyframe when fewer planes match the keyframe
+  /// Prior covariance of the constant-velocity prediction, per frame: 1 sigma [m] and [rad].
+  double prior_translation_sigma = 0.05;
+  double prior_rotation_sigma = 0.05;
+  bool loop_closure = true;             ///< search and verify loop closures
+  double loop_search_radius = 1.5;      ///< [m] candidate keyframes within this distance
+  double loop_max_angle_deg = 60.0;     ///< [deg] and viewing directions within this angle
+  int loop_min_keyframe_gap = 10;       ///< [keyframes] candidates are at least this much older
+  int loop_max_candidates = 3;          ///< [keyframes] tried per new keyframe (nearest first)
+  int loop_min_matches = 4;             ///< [planes] a closure needs this many consistent planes
+  double loop_max_residual = 0.02;      ///< [m] RMS plane-offset residual of a verified closure
+  /// Prior uncertainty of the relative pose to a loop candidate (accumulated drift) [m], [rad].
+  double loop_prior_translation_sigma = 0.3;
+  double loop_prior_rotation_sigma = 0.15;
+  /// Problems with the values, empty when fine.
+  std::vector<std::string> Validate() const;
+};
+
+/// What happened to one frame.
+struct SlamFrameResult {
+  std::size_t index = 0;
+  double timestamp = 0.0;
+  Pose T_world_sensor = Pose::Identity();  ///< current estimate (before later optimisations)
+  bool keyframe = false;
+  int planes = 0;           ///< detected in the frame
+  int matches = 0;          ///< planes matched with the keyframe
+  bool tracked = false;     ///< the registration converged (else the prior was used)
+  bool degenerate = false;  ///< some direction came from the prior / point alignment
+  int loop_closures = 0;    ///< verified closures added at this frame
+};
+
+/// Summary counters of a run.
+struct SlamStats {
+  std::size_t frames = 0;
+  std::size_t keyframes = 0;
+  std::size_t loop_closures = 0;      ///< verified and added
+  std::size_t loop_candidates = 0;    ///< tried
+  std::size_t degenerate_frames = 0;
+  std::size_t untracked_frames = 0;   ///< no usable plane registration (prior used)
+  std::size_t optimizations = 0;
+  double time_tracking_ms = 0.0;      ///< association + registration, total
+  double time_loop_ms = 0.0;          ///< loop-closure search and verification, total
+  double time_optimize_ms = 0.0;      ///< pose graph + map refit, total
+  double time_map_ms = 0.0;           ///< plane map insertion, total
+};
+
+class SlamSystem {
+ public:
+  SlamSystem(const SlamConfig& config, const registration::AssociationConfig& association,
+             const registration::RegistrationConfig& registration,
+             const PoseGraphConfig& pose_graph, const PlaneMapConfig& plane_map);
+
+  /// Processes the next frame (in time order) with its detected planes. The first frame defines
+  /// the world frame (identity) unless `T_world_first` was set.
+  SlamFrameResult ProcessFrame(double timestamp, const datasets::OrganizedCloud& cloud,
+                               const detection::Segmentation& segmentation);
+  /// Pose of the first frame in the world (e.g. the ground truth's, to compare maps); call before
+  /// the first frame.
+  void SetInitialPose(const Pose& T_world_first) { T_world_first_ = T_world_first; }
+  /// Final pose-graph optimisation and map re-fit. Returns the optimiser's result.
+  PoseGraphResult Finish();
+
+  /// Every processed frame's pose: T_world_keyframe (current graph) * T_keyframe_frame.
+  datasets::Trajectory EstimatedTrajectory() const;
+  /// Keyframe poses (current graph), by keyframe id.
+  std::unordered_map<std::int64_t, Pose> KeyframePoses() const;
+  /// Frame index of each keyframe id.
+  const std::vector<std::size_t>& keyframe_frames() const { return keyframe_frames_; }
+  const PoseGraph& graph() const { return graph_; }
+  const PlaneMap& map() const { return map_; }
+  const SlamStats& stats() const { return stats_; }
+
+ private:
+  struct Keyframe {
+    std::int64_t id = 0;
+    std::size_t frame = 0;
+    std::vector<detection::Plane> planes;
+  };
+  struct FrameRecord {
+    double timestamp = 0.0;
+    std::int64_t keyframe_id = 0;
+    Pose T_keyframe_frame = Pose::Identity();
+  };
+
+  Pose KeyframePose(std::int64_t id) const { return graph_.node(id).T_world_node(); }
+  void AddKeyframe(std::size_t frame, const Pose& T_world_sensor,
+                   const detection::Segmentation& segmentation,
+                   const datasets::OrganizedCloud& cloud);
+  int SearchLoopClosures(const Keyframe& current);
+  void Optimize();
+
+  SlamConfig config_;
+  registration::AssociationConfig association_config_;
+  registration::RegistrationConfig registration_config_;
+  PoseGraphConfig pose_graph_config_;
+  PoseGraph graph_;
+  PlaneMap map_;
+  std::vector<Keyframe> keyframes_;
+  std::vector<std::size_t> keyframe_frames_;
+  std::vector<FrameRecord> frames_;
+  Pose T_world_first_ = Pose::Identity();
+  Pose velocity_ = Pose::Identity();  ///< T_prev_curr of the last two frames
+  Pose T_keyframe_last_ = Pose::Identity();
+  SlamStats stats_;
+};
+
+}  // namespace planeslam::mapping

@@ -1,0 +1,243 @@
+#include "planeslam/mapping/slam_system.hpp"
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "planeslam/datasets/errors.hpp"
+
+namespace planeslam::mapping {
+namespace {
+
+constexpr double kDegToRad = M_PI / 180.0;
+
+double ElapsedMs(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - since)
+      .count();
+}
+
+double RotationAngle(const Pose& T) { return Eigen::AngleAxisd(T.rotation()).angle(); }
+
+Matrix6d DiagonalCovariance(double translation_sigma, double rotation_sigma) {
+  Vector6d diag;
+  diag << Eigen::Vector3d::Constant(translation_sigma * translation_sigma),
+      Eigen::Vector3d::Constant(rotation_sigma * rotation_sigma);
+  return diag.asDiagonal();
+}
+
+/// Edge information from a registration covariance. Registration reports (dt, dtheta) in the
+/// previous frame with additive translation and left-perturbed rotation, which is exactly the
+/// pose-graph residual's parameterisation (q_a^-1 (p_b - p_a) - p_ab; 2 vec(q_meas q_est^-1)).
+Matrix6d InformationFromCovariance(const Matrix6d& covariance) {
+  Matrix6d symmetric = 0.5 * (covariance + covariance.transpose());
+  Matrix6d information = symmetric.ldlt().solve(Matrix6d::Identity());
+  information = 0.5 * (information + information.transpose());
+  // Guard against a numerically indefinite result: floor the spectrum.
+  Eigen::SelfAdjointEigenSolver<Matrix6d> eig(information);
+  const Vector6d values = eig.eigenvalues().cwiseMax(1e-6);
+  return eig.eigenvectors() * values.asDiagonal() * eig.eigenvectors().transpose();
+}
+
+}  // namespace
+
+std::vector<std::string> SlamConfig::Validate() const {
+  std::vector<std::string> problems;
+  if (!(keyframe_translation > 0)) problems.push_back("keyframe_translation must be > 0");
+  if (!(keyframe_rotation_deg > 0)) problems.push_back("keyframe_rotation_deg must be > 0");
+  if (!(prior_translation_sigma > 0) || !(prior_rotation_sigma > 0)) {
+    problems.push_back("prior sigmas must be > 0");
+  }
+  if (!(loop_prior_translation_sigma > 0) || !(loop_prior_rotation_sigma > 0)) {
+    problems.push_back("loop prior sigmas must be > 0");
+  }
+  if (loop_min_matches < 3) problems.push_back("loop_min_matches must be >= 3");
+  if (loop_min_keyframe_gap < 1) problems.push_back("loop_min_keyframe_gap must be >= 1");
+  return problems;
+}
+
+SlamSystem::SlamSystem(const SlamConfig& config,
+                       const registration::AssociationConfig& association,
+                       const registration::RegistrationConfig& registration,
+                       const PoseGraphConfig& pose_graph, const PlaneMapConfig& plane_map)
+    : config_(config),
+      association_config_(association),
+      registration_config_(registration),
+      pose_graph_config_(pose_graph),
+      map_(plane_map) {
+  const auto problems = config_.Validate();
+  PLANESLAM_CHECK(problems.empty(), problems.front());
+}
+
+void SlamSystem::AddKeyframe(std::size_t frame, const Pose& T_world_sensor,
+                             const detection::Segmentation& segmentation,
+                             const datasets::OrganizedCloud& cloud) {
+  Keyframe keyframe;
+  keyframe.id = static_cast<std::int64_t>(keyframes_.size());
+  keyframe.frame = frame;
+  keyframe.planes = segmentation.planes;
+  // The first keyframe anchors the world frame (the optimiser holds it fixed).
+  graph_.AddNode(keyframe.id, T_world_sensor, /*fixed=*/keyframe.id == 0);
+  keyframes_.push_back(std::move(keyframe));
+  keyframe_frames_.push_back(frame);
+  ++stats_.keyframes;
+  const auto start = std::chrono::steady_clock::now();
+  map_.AddFrame(keyframes_.back().id, T_world_sensor, segmentation, cloud);
+  stats_.time_map_ms += ElapsedMs(start);
+}
+
+SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::OrganizedCloud& cloud,
+                                         const detection::Segmentation& segmentation) {
+  SlamFrameResult result;
+  result.index = frames_.size();
+  result.timestamp = timestamp;
+  result.planes = static_cast<int>(segmentation.planes.size());
+  ++stats_.frames;
+
+  if (keyframes_.empty()) {
+    AddKeyframe(result.index, T_world_first_, segmentation, cloud);
+    frames_.push_back({timestamp, 0, Pose::Identity()});
+    result.T_world_sensor = T_world_first_;
+    result.keyframe = true;
+    result.tracked = true;
+    return result;
+  }
+
+  const auto track_start = std::chrono::steady_clock::now();
+  const Keyframe& keyframe = keyframes_.back();
+  registration::MotionPrior prior;
+  prior.T_prev_curr = T_keyframe_last_ * velocity_;  // constant velocity
+  prior.covariance =
+      DiagonalCovariance(config_.prior_translation_sigma, config_.prior_rotation_sigma);
+  const registration::AssociationResult association = registration::AssociatePlanes(
+      keyframe.planes, segmentation.planes, prior, association_config_, registration_config_);
+  const registration::RegistrationResult& reg = association.registration;
+  result.matches = static_cast<int>(reg.inliers.size());
+  result.tracked = reg.converged;
+  result.degenerate = reg.degenerate || !reg.converged;
+  // The registration falls back to the prior itself (whole or per degenerate direction).
+  const Pose T_keyframe_curr = reg.converged ? reg.T_prev_curr : prior.T_prev_curr;
+  const Matrix6d covariance = reg.converged ? reg.covariance : prior.covariance;
+  stats_.time_tracking_ms += ElapsedMs(track_start);
+  if (!reg.converged) ++stats_.untracked_frames;
+  if (result.degenerate) ++stats_.degenerate_frames;
+
+  velocity_ = T_keyframe_last_.inverse() * T_keyframe_curr;
+  T_keyframe_last_ = T_keyframe_curr;
+  result.T_world_sensor = KeyframePose(keyframe.id) * T_keyframe_curr;
+
+  const bool moved = T_keyframe_curr.translation().norm() > config_.keyframe_translation ||
+                     RotationAngle(T_keyframe_curr) > config_.keyframe_rotation_deg * kDegToRad;
+  const bool weak = result.matches < config_.keyframe_min_matches;
+  if (!(moved || weak)) {
+    frames_.push_back({timestamp, keyframe.id, T_keyframe_curr});
+    return result;
+  }
+
+  // New keyframe: node, odometry edge weighted by the registration's uncertainty, map planes.
+  const std::int64_t previous_id = keyframe.id;
+  AddKeyframe(result.index, result.T_world_sensor, segmentation, cloud);
+  const Keyframe& current = keyframes_.back();
+  graph_.AddEdge(previous_id, current.id, T_keyframe_curr, InformationFromCovariance(covariance),
+                 EdgeKind::kOdometry);
+  frames_.push_back({timestamp, current.id, Pose::Identity()});
+  T_keyframe_last_ = Pose::Identity();
+  result.keyframe = true;
+
+  if (config_.loop_closure) {
+    const auto loop_start = std::chrono::steady_clock::now();
+    result.loop_closures = SearchLoopClosures(current);
+    stats_.time_loop_ms += ElapsedMs(loop_start);
+    if (result.loop_closures > 0) {
+      Optimize();
+      result.T_world_sensor = KeyframePose(current.id);
+    }
+  }
+  return result;
+}
+
+int SlamSystem::SearchLoopClosures(const Keyframe& current) {
+  const Pose T_world_current = KeyframePose(current.id);
+  struct Candidate {
+    double distance;
+    std::size_t index;
+  };
+  std::vector<Candidate> candidates;
+  for (std::size_t i = 0; i < keyframes_.size(); ++i) {
+    if (keyframes_[i].id > current.id - config_.loop_min_keyframe_gap) break;
+    const Pose T_world_old = KeyframePose(keyframes_[i].id);
+    const double distance = (T_world_old.translation() - T_world_current.translation()).norm();
+    const double angle = RotationAngle(T_world_old.inverse() * T_world_current);
+    if (distance < config_.loop_search_radius && angle < config_.loop_max_angle_deg * kDegToRad) {
+      candidates.push_back({distance, i});
+    }
+  }
+  std::sort(candidates.begin(), candidates.end(), [](const Candidate& a, const Candidate& b) {
+    return a.distance < b.distance || (a.distance == b.distance && a.index < b.index);
+  });
+  if (static_cast<int>(candidates.size()) > config_.loop_max_candidates) {
+    candidates.resize(config_.loop_max_candidates);
+  }
+
+  int added = 0;
+  for (const Candidate& candidate : candidates) {
+    const Keyframe& old = keyframes_[candidate.index];
+    ++stats_.loop_candidates;
+    registration::MotionPrior prior;
+    prior.T_prev_curr = KeyframePose(old.id).inverse() * T_world_current;
+    prior.covariance = DiagonalCovariance(config_.loop_prior_translation_sigma,
+                                          config_.loop_prior_rotation_sigma);
+    const registration::AssociationResult association = registration::AssociatePlanes(
+        old.planes, current.planes, prior, association_config_, registration_config_);
+    const registration::RegistrationResult& reg = association.registration;
+    // Only a closure the planes fully determine may correct the trajectory: a degenerate one
+    // would carry the (drifted) prior into the graph as if it were a measurement.
+    const bool verified = reg.converged && !reg.degenerate &&
+                          static_cast<int>(reg.inliers.size()) >= config_.loop_min_matches &&
+                          reg.residual_rms < config_.loop_max_residual;
+    if (!verified) continue;
+    graph_.AddEdge(old.id, current.id, reg.T_prev_curr, InformationFromCovariance(reg.covariance),
+                   EdgeKind::kLoopClosure);
+    ++added;
+  }
+  stats_.loop_closures += added;
+  return added;
+}
+
+void SlamSystem::Optimize() {
+  const auto start = std::chrono::steady_clock::now();
+  OptimizePoseGraph(graph_, pose_graph_config_);
+  map_.Refit(KeyframePoses());
+  ++stats_.optimizations;
+  stats_.time_optimize_ms += ElapsedMs(start);
+}
+
+PoseGraphResult SlamSystem::Finish() {
+  const auto start = std::chrono::steady_clock::now();
+  PoseGraphResult result;
+  if (!graph_.edges().empty()) {
+    result = OptimizePoseGraph(graph_, pose_graph_config_);
+    map_.Refit(KeyframePoses());
+    ++stats_.optimizations;
+  }
+  map_.MergeCoincidentPlanes();
+  stats_.time_optimize_ms += ElapsedMs(start);
+  return result;
+}
+
+datasets::Trajectory SlamSystem::EstimatedTrajectory() const {
+  datasets::Trajectory trajectory;
+  for (const FrameRecord& record : frames_) {
+    trajectory.Add(record.timestamp, KeyframePose(record.keyframe_id) * record.T_keyframe_frame);
+  }
+  return trajectory;
+}
+
+std::unordered_map<std::int64_t, Pose> SlamSystem::KeyframePoses() const {
+  std::unordered_map<std::int64_t, Pose> poses;
+  for (const Keyframe& keyframe : keyframes_) poses[keyframe.id] = KeyframePose(keyframe.id);
+  return poses;
+}
+
+}  // namespace planeslam::mapping
