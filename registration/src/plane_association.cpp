@@ -1,0 +1,334 @@
+#include "planeslam/registration/plane_association.hpp"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <numeric>
+#include <tuple>
+
+#include "plane_residual.hpp"
+
+namespace planeslam::registration {
+
+std::vector<std::string> AssociationConfig::Validate() const {
+  std::vector<std::string> p;
+  if (!(max_normal_angle_deg > 0 && max_normal_angle_deg <= 180))
+    p.push_back("max_normal_angle_deg must be in (0, 180]");
+  if (!(max_offset_difference > 0)) p.push_back("max_offset_difference must be > 0");
+  if (!(max_extent_ratio == 0 || max_extent_ratio >= 1))
+    p.push_back("max_extent_ratio must be 0 (off) or >= 1");
+  if (!(pair_angle_tolerance_deg > 0)) p.push_back("pair_angle_tolerance_deg must be > 0");
+  if (!(parallel_angle_deg >= 0 && parallel_angle_deg < 90))
+    p.push_back("parallel_angle_deg must be in [0, 90)");
+  if (!(pair_offset_tolerance > 0)) p.push_back("pair_offset_tolerance must be > 0");
+  if (!(flip_max_offset >= 0)) p.push_back("flip_max_offset must be >= 0");
+  if (max_candidates_per_plane < 1) p.push_back("max_candidates_per_plane must be >= 1");
+  if (max_tied_cliques < 1) p.push_back("max_tied_cliques must be >= 1");
+  if (max_search_nodes < 1) p.push_back("max_search_nodes must be >= 1");
+  if (!(inlier_chi2 > 0)) p.push_back("inlier_chi2 must be > 0");
+  return p;
+}
+
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+struct PlaneInfo {
+  bool ok = false;
+  Eigen::Vector3d n = Eigen::Vector3d::UnitZ();
+  double d = 0.0;
+  double var_n = 0.0;  ///< per tangent axis [rad^2]
+  double var_d = 0.0;  ///< [m^2]
+  double extent = 0.0;  ///< sqrt(largest scatter eigenvalue / K) [m], 0 = unknown
+};
+
+PlaneInfo Info(const detection::Plane& p, const RegistrationConfig& rc) {
+  PlaneInfo info;
+  if (!p.normal.allFinite() || !std::isfinite(p.d) || p.normal.norm() < 0.5) return info;
+  info.ok = true;
+  info.n = p.normal.normalized();
+  info.d = p.d;
+  const Eigen::Matrix4d cov =
+      PlaneCovarianceOrFallback(p, rc.fallback_point_sigma) * rc.covariance_scale;
+  info.var_n = 0.5 * cov.topLeftCorner<3, 3>().trace() + rc.min_normal_sigma * rc.min_normal_sigma;
+  info.var_d = cov(3, 3) + rc.min_offset_sigma * rc.min_offset_sigma;
+  if (p.point_count > 0 && p.eigenvalues(2) > 0 && std::isfinite(p.eigenvalues(2))) {
+    info.extent = std::sqrt(p.eigenvalues(2) / static_cast<double>(p.point_count));
+  }
+  return info;
+}
+
+struct Candidate {
+  int i = 0;  ///< prev
+  int j = 0;  ///< curr
+  bool flip = false;
+  Eigen::Vector3d n_b = Eigen::Vector3d::UnitZ();  ///< current normal, flipped if `flip`
+  double d_b = 0.0;
+  double score = 0.0;  ///< normalised gate distance, smaller is better
+};
+
+using Bits = std::vector<std::uint64_t>;
+
+/// Maximum cliques of a small graph by branch and bound with a greedy-colouring bound (Tomita and
+/// Seki's MCQ); collects up to `max_ties` cliques of the maximum size.
+class CliqueSearch {
+ public:
+  CliqueSearch(const std::vector<Bits>& adj, int n, int max_ties, int max_nodes)
+      : adj_(adj), n_(n), words_((n + 63) / 64), max_ties_(max_ties), max_nodes_(max_nodes) {}
+
+  void Run() {
+    Bits p(words_, 0);
+    for (int v = 0; v < n_; ++v) p[v / 64] |= std::uint64_t{1} << (v % 64);
+    std::vector<int> c;
+    if (n_ > 0) Expand(&c, p);
+  }
+  const std::vector<std::vector<int>>& cliques() const { return cliques_; }
+  bool exhausted() const { return exhausted_; }
+
+ private:
+  static bool Empty(const Bits& b) {
+    for (auto w : b) {
+      if (w) return false;
+    }
+    return true;
+  }
+  static int First(const Bits& b) {
+    for (std::size_t k = 0; k < b.size(); ++k) {
+      if (b[k]) return static_cast<int>(k * 64 + __builtin_ctzll(b[k]));
+    }
+    return -1;
+  }
+  static void Reset(Bits* b, int v) { (*b)[v / 64] &= ~(std::uint64_t{1} << (v % 64)); }
+
+  void ColorSort(const Bits& p, std::vector<int>* order, std::vector<int>* colors) const {
+    Bits u = p;
+    int color = 0;
+    while (!Empty(u)) {
+      ++color;
+      Bits q = u;
+      while (!Empty(q)) {
+        const int v = First(q);
+        Reset(&q, v);
+        Reset(&u, v);
+        for (int k = 0; k < words_; ++k) q[k] &= ~adj_[v][k];
+        order->push_back(v);
+        colors->push_back(color);
+      }
+    }
+  }
+
+  void Record(const std::vector<int>& c) {
+    const int size = static_cast<int>(c.size());
+    if (size > best_) {
+      best_ = size;
+      cliques_.assign(1, c);
+    } else if (size == best_ && static_cast<int>(cliques_.size()) < max_ties_) {
+      cliques_.push_back(c);
+    }
+  }
+
+  void Expand(std::vector<int>* c, Bits p) {
+    if (++nodes_ > max_nodes_) {
+      exhausted_ = true;
+      return;
+    }
+    std::vector<int> order, colors;
+    ColorSort(p, &order, &colors);
+    for (int k = static_cast<int>(order.size()) - 1; k >= 0; --k) {
+      // Equal-size cliques are still wanted for the tie-break until enough are collected.
+      const bool ties_full = static_cast<int>(cliques_.size()) >= max_ties_;
+      if (static_cast<int>(c->size()) + colors[k] < best_ + (ties_full ? 1 : 0)) return;
+      const int v = order[k];
+      c->push_back(v);
+      Bits np(words_);
+      for (int w = 0; w < words_; ++w) np[w] = p[w] & adj_[v][w];
+      if (Empty(np)) {
+        Record(*c);
+      } else {
+        Expand(c, np);
+      }
+      c->pop_back();
+      Reset(&p, v);
+      if (exhausted_) return;
+    }
+  }
+
+  const std::vector<Bits>& adj_;
+  int n_;
+  int words_;
+  int max_ties_;
+  int max_nodes_;
+  int nodes_ = 0;
+  int best_ = 0;
+  bool exhausted_ = false;
+  std::vector<std::vector<int>> cliques_;
+};
+
+double LogDet(const Matrix6d& c) {
+  Eigen::SelfAdjointEigenSolver<Matrix6d> es(c);
+  double s = 0.0;
+  for (int k = 0; k < 6; ++k) s += std::log(std::max(es.eigenvalues()(k), 1e-300));
+  return s;
+}
+
+}  // namespace
+
+AssociationResult AssociatePlanes(const std::vector<detection::Plane>& prev,
+                                  const std::vector<detection::Plane>& curr,
+                                  const MotionPrior& prior, const AssociationConfig& config,
+                                  const RegistrationConfig& rc) {
+  AssociationResult out;
+  const Eigen::Matrix3d R0 = prior.T_prev_curr.linear();
+  const Eigen::Vector3d t0 = prior.T_prev_curr.translation();
+
+  std::vector<PlaneInfo> ia, ib;
+  for (const auto& p : prev) ia.push_back(Info(p, rc));
+  for (const auto& p : curr) ib.push_back(Info(p, rc));
+
+  // 1. Gated candidates.
+  std::vector<Candidate> cands;
+  const double cos_gate = std::cos(config.max_normal_angle_deg * kDeg);
+  for (int i = 0; i < static_cast<int>(prev.size()); ++i) {
+    if (!ia[i].ok) continue;
+    std::vector<Candidate> mine;
+    for (int j = 0; j < static_cast<int>(curr.size()); ++j) {
+      if (!ib[j].ok) continue;
+      if (config.max_extent_ratio > 0 && ia[i].extent > 0 && ib[j].extent > 0) {
+        const double ratio = std::max(ia[i].extent, ib[j].extent) /
+                             std::min(ia[i].extent, ib[j].extent);
+        if (ratio > config.max_extent_ratio) continue;
+      }
+      for (int flip = 0; flip < 2; ++flip) {
+        if (flip && !(ib[j].d < config.flip_max_offset)) break;
+        Candidate c;
+        c.i = i;
+        c.j = j;
+        c.flip = flip != 0;
+        c.n_b = flip ? Eigen::Vector3d(-ib[j].n) : ib[j].n;
+        c.d_b = flip ? -ib[j].d : ib[j].d;
+        const Eigen::Vector3d n_pred = R0 * c.n_b;
+        const double cosang = std::clamp(ia[i].n.dot(n_pred), -1.0, 1.0);
+        if (cosang < cos_gate) continue;
+        const double d_err = ia[i].d - (c.d_b + n_pred.dot(t0));
+        if (std::abs(d_err) > config.max_offset_difference) continue;
+        const double ang = std::acos(cosang) / (config.max_normal_angle_deg * kDeg);
+        const double off = d_err / config.max_offset_difference;
+        c.score = ang * ang + off * off;
+        mine.push_back(c);
+      }
+    }
+    std::stable_sort(mine.begin(), mine.end(),
+                     [](const Candidate& a, const Candidate& b) { return a.score < b.score; });
+    if (static_cast<int>(mine.size()) > config.max_candidates_per_plane) {
+      mine.resize(config.max_candidates_per_plane);
+    }
+    cands.insert(cands.end(), mine.begin(), mine.end());
+  }
+  out.candidates = static_cast<int>(cands.size());
+  if (cands.empty()) {
+    out.registration = RegisterPlanes(prev, curr, {}, prior, rc);
+    return out;
+  }
+
+  // 2. Pairwise consistency graph.
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es_prior(
+      prior.covariance.topLeftCorner<3, 3>());
+  const double sigma_t_prior =
+      std::sqrt(std::max(es_prior.eigenvalues().maxCoeff(), 0.0));
+  const double t_slack = std::isfinite(sigma_t_prior) ? 3.0 * sigma_t_prior : 3.0;
+  const double tol_angle0 = config.pair_angle_tolerance_deg * kDeg;
+  const double parallel = config.parallel_angle_deg * kDeg;
+  const int n = static_cast<int>(cands.size());
+  const int words = (n + 63) / 64;
+  std::vector<Bits> adj(n, Bits(words, 0));
+  for (int u = 0; u < n; ++u) {
+    const Candidate& a = cands[u];
+    for (int v = u + 1; v < n; ++v) {
+      const Candidate& b = cands[v];
+      if (a.i == b.i || a.j == b.j) continue;  // one-to-one
+      const PlaneInfo& a1 = ia[a.i];
+      const PlaneInfo& a2 = ia[b.i];
+      const double ang_a = std::acos(std::clamp(a1.n.dot(a2.n), -1.0, 1.0));
+      const double ang_b = std::acos(std::clamp(a.n_b.dot(b.n_b), -1.0, 1.0));
+      const double var_ang = a1.var_n + a2.var_n + ib[a.j].var_n + ib[b.j].var_n;
+      const double tol_angle = std::sqrt(tol_angle0 * tol_angle0 + 9.0 * var_ang);
+      if (std::abs(ang_a - ang_b) > tol_angle) continue;
+      // (Anti)parallel pairs: d_a1 -+ d_a2 = d_b1 -+ d_b2 + (n_a1 -+ n_a2).t, exactly for a rigid
+      // motion, so the prior translation only matters through the small (n_a1 -+ n_a2).
+      const bool par = ang_a < parallel;
+      const bool anti = ang_a > M_PI - parallel;
+      if (par || anti) {
+        const double s = par ? -1.0 : 1.0;
+        const Eigen::Vector3d dn = a1.n + s * a2.n;
+        const double e = (a1.d + s * a2.d) - (a.d_b + s * b.d_b) - dn.dot(t0);
+        const double var_off = a1.var_d + a2.var_d + ib[a.j].var_d + ib[b.j].var_d;
+        const double tol = std::sqrt(config.pair_offset_tolerance * config.pair_offset_tolerance +
+                                     9.0 * var_off) +
+                           dn.norm() * t_slack;
+        if (std::abs(e) > tol) continue;
+      }
+      adj[u][v / 64] |= std::uint64_t{1} << (v % 64);
+      adj[v][u / 64] |= std::uint64_t{1} << (u % 64);
+    }
+  }
+
+  // 3. Maximum consistent sets.
+  CliqueSearch search(adj, n, config.max_tied_cliques, config.max_search_nodes);
+  search.Run();
+  out.search_exhausted = search.exhausted();
+  out.tied_cliques = static_cast<int>(search.cliques().size());
+  out.clique_size = search.cliques().empty() ? 0 : static_cast<int>(search.cliques()[0].size());
+
+  // 4. Verify each tied clique: solve, keep the candidates whose residual (with the motion's own
+  // uncertainty) passes the chi^2 gate, one-to-one, best first; re-solve; score.
+  auto to_match = [&](int k) { return PlaneMatch{cands[k].i, cands[k].j, cands[k].flip}; };
+  using Score = std::tuple<int, int, double>;  // (-matches, degenerate dims, log det cov)
+  bool have_best = false;
+  Score best_score;
+  for (const auto& clique : search.cliques()) {
+    std::vector<PlaneMatch> matches;
+    for (int k : clique) matches.push_back(to_match(k));
+    RegistrationResult reg = RegisterPlanes(prev, curr, matches, prior, rc);
+    const Eigen::Matrix3d R = reg.T_prev_curr.linear();
+    const Eigen::Vector3d t = reg.T_prev_curr.translation();
+    std::vector<std::pair<double, int>> chi2;
+    for (int k = 0; k < n; ++k) {
+      internal::MatchData md;
+      if (!internal::MakeMatchData(prev, curr, to_match(k), rc, &md)) continue;
+      const internal::Linearized lin = internal::Linearize(md, R, t, rc);
+      const Eigen::Matrix3d s = lin.cov + lin.J * reg.covariance * lin.J.transpose();
+      const double c2 = lin.r.dot(s.ldlt().solve(lin.r));
+      if (std::isfinite(c2) && c2 <= config.inlier_chi2) chi2.emplace_back(c2, k);
+    }
+    std::stable_sort(chi2.begin(), chi2.end());
+    std::vector<char> used_a(prev.size(), 0), used_b(curr.size(), 0);
+    std::vector<PlaneMatch> verified;
+    for (const auto& [c2, k] : chi2) {
+      if (used_a[cands[k].i] || used_b[cands[k].j]) continue;
+      used_a[cands[k].i] = used_b[cands[k].j] = 1;
+      verified.push_back(to_match(k));
+    }
+    std::sort(verified.begin(), verified.end(), [](const PlaneMatch& x, const PlaneMatch& y) {
+      return std::tie(x.prev, x.curr) < std::tie(y.prev, y.curr);
+    });
+    if (!(verified.size() == matches.size() &&
+          std::is_permutation(verified.begin(), verified.end(), matches.begin()))) {
+      reg = RegisterPlanes(prev, curr, verified, prior, rc);
+    }
+    const Score score{-static_cast<int>(verified.size()),
+                      static_cast<int>(reg.degenerate_directions.size()), LogDet(reg.covariance)};
+    if (!have_best || score < best_score) {
+      have_best = true;
+      best_score = score;
+      out.matches = verified;
+      out.registration = reg;
+    }
+  }
+  if (!have_best) out.registration = RegisterPlanes(prev, curr, {}, prior, rc);
+  return out;
+}
+
+}  // namespace planeslam::registration
