@@ -117,9 +117,15 @@ void ApplyRangeLimits(OrganizedCloud* cloud, double min_range, double max_range)
 }
 
 FileSequence::FileSequence(std::string name, std::vector<std::string> files, Loader loader,
-                           std::vector<std::optional<Pose>> gt)
-    : name_(std::move(name)), files_(std::move(files)), loader_(std::move(loader)), gt_(std::move(gt)) {
+                           std::vector<std::optional<Pose>> gt, std::vector<double> stamps)
+    : name_(std::move(name)),
+      files_(std::move(files)),
+      stamps_(std::move(stamps)),
+      loader_(std::move(loader)),
+      gt_(std::move(gt)) {
   PLANESLAM_CHECK(gt_.empty() || gt_.size() == files_.size(), "one pose per file");
+  PLANESLAM_CHECK(stamps_.empty() || stamps_.size() == files_.size(), "one stamp per file");
+  if (!stamps_.empty()) return;
   stamps_.resize(files_.size());
   bool usable = true;
   for (std::size_t i = 0; i < files_.size() && usable; ++i) {

@@ -51,6 +51,12 @@ std::vector<std::string> SensorConfig::Validate() const {
     problems.push_back("lidar_rows and lidar_cols must be in [1, " +
                        std::to_string(limits.max_side) + "]");
   }
+  if (lidar_column_shift < 0 || lidar_column_shift > 8) {
+    problems.push_back("lidar_column_shift must be in [0, 8]");
+  }
+  if (lidar_row_mode != "scan_order" && lidar_row_mode != "elevation") {
+    problems.push_back("lidar_row_mode must be 'scan_order' or 'elevation'");
+  }
   if (!finite(lidar_elevation_max_deg) || !finite(lidar_elevation_min_deg) ||
       lidar_elevation_max_deg <= lidar_elevation_min_deg || lidar_elevation_max_deg > 90.0 ||
       lidar_elevation_min_deg < -90.0) {

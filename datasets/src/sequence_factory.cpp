@@ -7,6 +7,7 @@
 #include "planeslam/datasets/depth_image.hpp"
 #include "planeslam/datasets/errors.hpp"
 #include "planeslam/datasets/file_sequence.hpp"
+#include "planeslam/datasets/kitti_scan.hpp"
 #include "planeslam/datasets/tum_sequence.hpp"
 
 namespace planeslam::datasets {
@@ -70,9 +71,9 @@ std::unique_ptr<Sequence> OpenSequence(const std::string& folder, const SensorCo
     case SequenceLayout::kPcdFolder:
       return OpenPcdFolder(folder, config);
     case SequenceLayout::kKittiBin:
-      break;
+      return OpenKittiFolder(folder, config);
   }
-  throw IoError(folder, "layout not supported yet");
+  throw IoError(folder, "unknown layout");
 }
 
 Frame LoadSingleFrame(const std::string& path, const SensorConfig& config) {
@@ -86,6 +87,10 @@ Frame LoadSingleFrame(const std::string& path, const SensorConfig& config) {
   if (ext == ".png") {
     frame.cloud = ReadDepthCloud(path, config.EffectiveIntrinsics(), config.depth_scale,
                                  config.min_depth, config.max_depth);
+    return frame;
+  }
+  if (ext == ".bin") {
+    frame.cloud = ReadKittiRangeImage(path, config);
     return frame;
   }
   if (ext == ".pcd") {

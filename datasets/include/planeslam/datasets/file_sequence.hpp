@@ -31,9 +31,10 @@ class FileSequence : public Sequence {
   using Loader = std::function<OrganizedCloud(const std::string& path)>;
 
   /// Timestamps come from the file names when every name has a number and they increase
-  /// strictly, else they are the indices. `gt` is empty or one entry per file.
+  /// strictly, else they are the indices; `stamps`, when not empty (one per file), overrides.
+  /// `gt` is empty or one entry per file.
   FileSequence(std::string name, std::vector<std::string> files, Loader loader,
-               std::vector<std::optional<Pose>> gt = {});
+               std::vector<std::optional<Pose>> gt = {}, std::vector<double> stamps = {});
 
   std::size_t Size() const override { return files_.size(); }
   Frame Load(std::size_t index) const override;

@@ -1,0 +1,279 @@
+#include "planeslam/datasets/kitti_scan.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+
+#include "planeslam/datasets/errors.hpp"
+#include "planeslam/datasets/input_limits.hpp"
+#include "planeslam/datasets/trajectory_io.hpp"
+#include "reader_util.hpp"
+
+namespace planeslam::datasets {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kDegToRad = kPi / 180.0;
+
+int ElevationRow(double elevation, const SensorConfig& config) {
+  const double top = config.lidar_elevation_max_deg * kDegToRad;
+  const double bottom = config.lidar_elevation_min_deg * kDegToRad;
+  const double step = config.lidar_rows > 1 ? (top - bottom) / (config.lidar_rows - 1) : 1.0;
+  const double row = std::round((top - elevation) / step);
+  if (row < 0 || row >= config.lidar_rows) return -1;
+  return static_cast<int>(row);
+}
+
+}  // namespace
+
+std::vector<LidarPoint> ParseKittiScan(const std::string& bytes, const std::string& name) {
+  if (bytes.empty()) throw IoError(name, "empty scan");
+  if (bytes.size() % 16 != 0) {
+    throw IoError(name, "size " + std::to_string(bytes.size()) +
+                            " bytes is not a multiple of 16 (float32 x y z reflectance per point)");
+  }
+  const std::size_t n = bytes.size() / 16;
+  if (static_cast<std::int64_t>(n) > GlobalInputLimits().max_points) {
+    throw IoError(name, std::to_string(n) + " points exceed the input limits");
+  }
+  std::vector<LidarPoint> points(n);
+  // Vector4f is 4 packed floats (16 bytes, no padding).
+  std::memcpy(static_cast<void*>(points.data()), bytes.data(), bytes.size());
+  return points;
+}
+
+std::vector<LidarPoint> ReadKittiScan(const std::string& path) {
+  return ParseKittiScan(detail::ReadWholeFile(path, GlobalInputLimits().max_points * 16), path);
+}
+
+int RecoverRings(const std::vector<LidarPoint>& scan, std::vector<int>* rings) {
+  rings->assign(scan.size(), 0);
+  // KITTI stores each laser as one counter-clockwise sweep that starts just left of straight
+  // ahead (azimuth 0+), wraps from +pi to -pi behind the car and ends just right of ahead (0-).
+  // A new laser starts where the azimuth crosses from slightly negative to slightly positive
+  // after the sweep has wrapped; requiring the wrap ignores jitter around 0 at a sweep's start.
+  int ring = 0;
+  bool wrapped = false;
+  double prev = std::numeric_limits<double>::quiet_NaN();
+  for (std::size_t i = 0; i < scan.size(); ++i) {
+    const LidarPoint& p = scan[i];
+    if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || (p.x() == 0 && p.y() == 0)) {
+      (*rings)[i] = ring;
+      continue;
+    }
+    const double az = std::atan2(p.y(), p.x());
+    if (std::isfinite(prev)) {
+      if (prev > kPi / 2 && az < -kPi / 2) {
+        wrapped = true;
+      } else if (wrapped && prev < 0 && prev > -kPi / 2 && az >= 0 && az < kPi / 2) {
+        ++ring;
+        wrapped = false;
+      }
+    }
+    prev = az;
+    (*rings)[i] = ring;
+  }
+  const int count = scan.empty() ? 0 : ring + 1;
+  // Renumber by mean elevation, highest first, so rows go top to bottom.
+  std::vector<double> sum(count, 0.0);
+  std::vector<std::size_t> num(count, 0);
+  for (std::size_t i = 0; i < scan.size(); ++i) {
+    const LidarPoint& p = scan[i];
+    const double r = std::hypot(p.x(), p.y());
+    if (!std::isfinite(r) || !std::isfinite(p.z()) || (r == 0 && p.z() == 0)) continue;
+    sum[(*rings)[i]] += std::atan2(p.z(), r);
+    ++num[(*rings)[i]];
+  }
+  std::vector<int> order(count);
+  for (int k = 0; k < count; ++k) order[k] = k;
+  auto mean = [&](int k) { return num[k] ? sum[k] / num[k] : -1e9; };
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return mean(a) > mean(b); });
+  std::vector<int> rank(count);
+  for (int k = 0; k < count; ++k) rank[order[k]] = k;
+  for (int& r : *rings) r = rank[r];
+  return count;
+}
+
+OrganizedCloud ProjectToRangeImage(const std::vector<LidarPoint>& scan, const SensorConfig& config,
+                                   RangeProjectionStats* stats) {
+  config.ValidateOrThrow();
+  RangeProjectionStats s;
+  s.points = scan.size();
+  const int rows = config.lidar_rows, cols = config.lidar_cols;
+  OrganizedCloud cloud(cols, rows, SensorModel::kSpherical);
+  std::vector<float> best(static_cast<std::size_t>(rows) * cols,
+                          std::numeric_limits<float>::infinity());
+  std::vector<int> rings;
+  if (config.lidar_row_mode == "scan_order") {
+    s.used_scan_order = RecoverRings(scan, &rings) == rows;
+  }
+  for (std::size_t i = 0; i < scan.size(); ++i) {
+    const LidarPoint& p = scan[i];
+    const double range = p.head<3>().cast<double>().norm();
+    if (!std::isfinite(range) || range == 0.0) {
+      ++s.invalid;
+      continue;
+    }
+    if (range < config.min_depth || (config.max_depth > 0.0 && range > config.max_depth)) {
+      ++s.outside_range;
+      continue;
+    }
+    int row;
+    if (s.used_scan_order) {
+      row = rings[i];
+    } else {
+      row = ElevationRow(std::atan2(p.z(), std::hypot(p.x(), p.y())), config);
+      if (row < 0) {
+        ++s.outside_elevation;
+        continue;
+      }
+    }
+    const double az = std::atan2(p.y(), p.x());  // (-pi, pi]
+    const double u = (kPi - az) / (2.0 * kPi) * cols;
+    const int col = std::clamp(static_cast<int>(std::floor(u)), 0, cols - 1);
+    const std::size_t row_start = static_cast<std::size_t>(row) * cols;
+    std::size_t cell = row_start + col;
+    if (std::isfinite(best[cell]) && config.lidar_column_shift > 0) {
+      // Try free columns nearest first, on the side the point leans to first; azimuth wraps.
+      const int lean = (u - std::floor(u)) < 0.5 ? -1 : 1;
+      for (int d = 1; d <= config.lidar_column_shift; ++d) {
+        bool found = false;
+        for (int side : {lean, -lean}) {
+          const int c = ((col + side * d) % cols + cols) % cols;
+          if (!std::isfinite(best[row_start + c])) {
+            cell = row_start + c;
+            found = true;
+            ++s.shifted;
+            break;
+          }
+        }
+        if (found) break;
+      }
+    }
+    if (std::isfinite(best[cell])) ++s.collisions;  // one of the two is lost
+    if (range < best[cell]) {
+      best[cell] = static_cast<float>(range);
+      cloud.points[cell] = p.head<3>();
+    }
+  }
+  s.placed = s.points - s.invalid - s.outside_elevation - s.outside_range - s.collisions;
+  if (stats) *stats = s;
+  return cloud;
+}
+
+OrganizedCloud ReadKittiRangeImage(const std::string& path, const SensorConfig& config,
+                                   RangeProjectionStats* stats) {
+  return ProjectToRangeImage(ReadKittiScan(path), config, stats);
+}
+
+namespace {
+
+// Frame number in a KITTI scan name ("000123.bin" -> 123); -1 when the stem is not all digits.
+long FrameNumber(const std::string& path) {
+  const std::string stem = fs::path(path).stem().string();
+  std::int64_t n = 0;
+  if (stem.empty() || stem.size() > 12 || !detail::ParseInt64(stem, &n)) return -1;
+  return static_cast<long>(n);
+}
+
+// The `Tr:` line of a KITTI calib.txt (velodyne -> camera 0), if any.
+std::optional<Pose> ReadVeloToCam(const fs::path& calib) {
+  std::error_code ec;
+  if (!fs::exists(calib, ec)) return std::nullopt;
+  const std::string text = detail::ReadWholeFile(calib.string(), 1 << 20);
+  detail::LineReader reader(text, calib.string());
+  std::string_view line;
+  while (reader.Next(&line)) {
+    const auto tok = detail::SplitWhitespace(line);
+    if (tok.empty() || (tok[0] != "Tr:" && tok[0] != "Tr_velo_cam:")) continue;
+    if (tok.size() != 13) throw IoError(calib.string(), reader.line_number(), "Tr needs 12 numbers");
+    Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
+    for (int k = 0; k < 12; ++k) {
+      if (!detail::ParseDouble(tok[k + 1], &m(k / 4, k % 4))) {
+        throw IoError(calib.string(), reader.line_number(),
+                      "expected a number, got '" + std::string(tok[k + 1]) + "'");
+      }
+    }
+    Pose T;
+    T.matrix() = m;
+    return T;
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
+std::unique_ptr<FileSequence> OpenKittiFolder(const std::string& folder,
+                                              const SensorConfig& config) {
+  config.ValidateOrThrow();
+  auto files = ListFrameFiles(folder, ".bin");
+  if (files.empty()) throw IoError(folder, "no .bin files in folder");
+  const fs::path dir(folder);
+  std::error_code ec;
+
+  std::vector<std::optional<Pose>> gt;
+  std::string poses_path = config.lidar_poses_file;
+  if (poses_path.empty() && fs::exists(dir / "poses.txt", ec)) poses_path = (dir / "poses.txt").string();
+  if (!poses_path.empty()) {
+    const Trajectory poses = ReadKittiTrajectory(poses_path);
+    const auto velo_to_cam = ReadVeloToCam(dir / "calib.txt");
+    gt.resize(files.size());
+    for (std::size_t i = 0; i < files.size(); ++i) {
+      const long n = FrameNumber(files[i]);
+      if (n < 0) {
+        throw IoError(files[i], "cannot match the scan to a pose: its name is not a frame number");
+      }
+      if (static_cast<std::size_t>(n) >= poses.size()) {
+        throw IoError(poses_path, "has " + std::to_string(poses.size()) + " poses, scan " +
+                                      fs::path(files[i]).filename().string() + " needs pose " +
+                                      std::to_string(n));
+      }
+      Pose T = poses.poses[n];
+      if (velo_to_cam) T = velo_to_cam->inverse() * T * *velo_to_cam;
+      gt[i] = T;
+    }
+  }
+
+  std::vector<double> stamps;
+  if (fs::exists(dir / "times.txt", ec)) {
+    const std::string path = (dir / "times.txt").string();
+    const std::string text = detail::ReadWholeFile(path, detail::MaxInputFileBytes());
+    std::vector<double> times;
+    detail::LineReader reader(text, path);
+    std::string_view line;
+    while (reader.Next(&line)) {
+      line = detail::Trim(line);
+      if (line.empty()) continue;
+      double t = 0;
+      if (!detail::ParseDouble(line, &t)) {
+        throw IoError(path, reader.line_number(), "expected a time in seconds");
+      }
+      times.push_back(t);
+    }
+    for (const auto& f : files) {
+      const long n = FrameNumber(f);
+      if (n < 0 || static_cast<std::size_t>(n) >= times.size()) {
+        throw IoError(path, "has " + std::to_string(times.size()) + " times, scan " +
+                                fs::path(f).filename().string() + " has none");
+      }
+      if (!stamps.empty() && !(times[n] > stamps.back())) {
+        throw IoError(path, "time of scan " + fs::path(f).filename().string() +
+                                " is not after the previous scan's");
+      }
+      stamps.push_back(times[n]);
+    }
+  }
+  fs::path p = dir.lexically_normal();
+  if (p.filename().empty()) p = p.parent_path();
+  return std::make_unique<FileSequence>(
+      p.filename().string(), std::move(files),
+      [config](const std::string& path) { return ReadKittiRangeImage(path, config); },
+      std::move(gt), std::move(stamps));
+}
+
+}  // namespace planeslam::datasets

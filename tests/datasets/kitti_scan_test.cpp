@@ -1,0 +1,205 @@
+#include "planeslam/datasets/kitti_scan.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+
+#include "planeslam/datasets/errors.hpp"
+#include "planeslam/datasets/sequence_factory.hpp"
+#include "test_support.hpp"
+
+namespace planeslam::datasets {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string ErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const IoError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+void WriteScan(const fs::path& path, const std::vector<LidarPoint>& points) {
+  std::ofstream out(path, std::ios::binary);
+  out.write(reinterpret_cast<const char*>(points.data()),
+            static_cast<std::streamsize>(points.size() * 16));
+}
+
+constexpr double kPi = 3.14159265358979323846;
+
+// A synthetic spinning LiDAR in KITTI's point order: ring by ring, each ring one azimuth sweep
+// (counter-clockwise from -pi), all at range `range`. Elevations are uneven like the HDL-64E's.
+std::vector<LidarPoint> SyntheticScan(int rings, int per_ring, double range,
+                                      std::vector<double>* elevations_deg = nullptr) {
+  std::vector<LidarPoint> pts;
+  std::vector<double> el;
+  for (int r = 0; r < rings; ++r) {
+    el.push_back(r < rings / 2 ? 2.0 - r * (1.0 / 3.0) : 2.0 - (rings / 2) / 3.0 - (r - rings / 2) * 0.5);
+  }
+  for (int r = 0; r < rings; ++r) {
+    const double e = el[r] * kPi / 180.0;
+    for (int k = 0; k < per_ring; ++k) {
+      // KITTI order: from just left of ahead (0+) round to just right of it (0-).
+      double az = (k + 0.5) * 2.0 * kPi / per_ring;
+      if (az > kPi) az -= 2.0 * kPi;
+      pts.emplace_back(static_cast<float>(range * std::cos(e) * std::cos(az)),
+                       static_cast<float>(range * std::cos(e) * std::sin(az)),
+                       static_cast<float>(range * std::sin(e)), 0.5f);
+    }
+  }
+  if (elevations_deg) *elevations_deg = el;
+  return pts;
+}
+
+TEST(KittiScan, ScanOrderRingsGiveOneRowPerLaser) {
+  std::vector<double> el;
+  const auto scan = SyntheticScan(64, 1000, 10.0, &el);
+  SensorConfig config;
+  RangeProjectionStats stats;
+  const OrganizedCloud image = ProjectToRangeImage(scan, config, &stats);
+  EXPECT_TRUE(stats.used_scan_order);
+  EXPECT_EQ(image.width, 2083);
+  EXPECT_EQ(image.height, 64);
+  EXPECT_EQ(image.model, SensorModel::kSpherical);
+  EXPECT_EQ(stats.placed, scan.size());  // 1000 azimuths < 2048 columns: no collision
+  EXPECT_EQ(image.CountValid(), scan.size());
+  // Row r holds ring r (elevations decrease down the image); the middle column looks along +x.
+  for (int r = 0; r < 64; ++r) {
+    std::size_t n = 0;
+    for (int c = 0; c < image.width; ++c) {
+      const auto& p = image.at(r, c);
+      if (!OrganizedCloud::IsValid(p)) continue;
+      ++n;
+      EXPECT_NEAR(std::asin(p.z() / p.norm()) * 180.0 / kPi, el[r], 1e-3);
+    }
+    EXPECT_EQ(n, 1000u);
+  }
+  // Column c holds azimuth pi - 2 pi (c + 0.5) / cols: ahead (+x) in the middle, behind at the ends.
+  for (int c = 0; c < image.width; ++c) {
+    const auto& p = image.at(10, c);
+    if (!OrganizedCloud::IsValid(p)) continue;
+    const double expected = kPi - 2.0 * kPi * (c + 0.5) / image.width;
+    double diff = std::atan2(p.y(), p.x()) - expected;
+    diff = std::remainder(diff, 2.0 * kPi);
+    EXPECT_LE(std::abs(diff), kPi / image.width + 1e-6) << c;
+  }
+  // Uniform elevation bins cannot separate lasers 1/3 degree apart: collisions appear.
+  SensorConfig uniform;
+  uniform.lidar_row_mode = "elevation";
+  uniform.lidar_column_shift = 0;
+  RangeProjectionStats ustats;
+  ProjectToRangeImage(scan, uniform, &ustats);
+  EXPECT_FALSE(ustats.used_scan_order);
+  EXPECT_GT(ustats.collisions, 0u);
+  EXPECT_EQ(ustats.placed + ustats.collisions + ustats.outside_elevation, scan.size());
+}
+
+TEST(KittiScan, CollisionsKeepTheNearerPoint) {
+  std::vector<LidarPoint> scan = {LidarPoint(10, 0, 0, 0), LidarPoint(5, -0.0001f, 0, 0),
+                                  LidarPoint(0, 0, 0, 0),
+                                  LidarPoint(std::nanf(""), 1, 1, 0)};
+  SensorConfig config;
+  config.lidar_row_mode = "elevation";
+  config.lidar_column_shift = 0;
+  RangeProjectionStats stats;
+  const OrganizedCloud image = ProjectToRangeImage(scan, config, &stats);
+  EXPECT_EQ(stats.invalid, 2u);
+  EXPECT_EQ(stats.collisions, 1u);
+  EXPECT_EQ(stats.placed, 1u);
+  ASSERT_EQ(image.CountValid(), 1u);
+  for (const auto& p : image.points) {
+    if (OrganizedCloud::IsValid(p)) {
+      EXPECT_FLOAT_EQ(p.x(), 5.0f);
+    }
+  }
+}
+
+TEST(KittiScan, RealScansProjectAlmostEveryPoint) {
+  PLANESLAM_REQUIRE_DATA();
+  const fs::path dir = test::DataDir() / "kitti_velodyne";
+  const auto seq = OpenSequence(dir.string(), SensorConfig{});
+  ASSERT_EQ(seq->Size(), 6u);
+  EXPECT_DOUBLE_EQ(seq->Timestamp(3), 3.0);
+  for (std::size_t i = 0; i < seq->Size(); ++i) {
+    const std::string path = (dir / fs::path(seq->Load(i).source).filename()).string();
+    const auto scan = ReadKittiScan(path);
+    for (const char* mode : {"scan_order", "elevation"}) {
+      SensorConfig config;
+      config.lidar_row_mode = mode;
+      RangeProjectionStats stats;
+      const OrganizedCloud image = ProjectToRangeImage(scan, config, &stats);
+      std::printf(
+          "%s %-10s points %zu placed %zu (%.2f%%) shifted %zu collisions %zu outside %zu "
+          "invalid %zu rings %s\n",
+          fs::path(path).filename().c_str(), mode, stats.points, stats.placed,
+          100.0 * stats.PlacedFraction(), stats.shifted, stats.collisions,
+          stats.outside_elevation, stats.invalid, stats.used_scan_order ? "yes" : "no");
+      EXPECT_EQ(image.CountValid(), stats.placed);
+      if (std::string(mode) == "scan_order") {
+        EXPECT_TRUE(stats.used_scan_order);
+        EXPECT_GE(stats.PlacedFraction(), 0.95);
+        // Within a ring a point moves at most lidar_column_shift columns from its azimuth.
+        for (int r = 0; r < image.height; ++r) {
+          for (int c = 0; c < image.width; ++c) {
+            const auto& p = image.at(r, c);
+            if (!OrganizedCloud::IsValid(p)) continue;
+            const double u = (kPi - std::atan2(p.y(), p.x())) / (2.0 * kPi) * image.width;
+            const double d = std::remainder(u - (c + 0.5), image.width);
+            ASSERT_LE(std::abs(d), config.lidar_column_shift + 0.5 + 1e-3);
+          }
+        }
+      }
+    }
+  }
+}
+
+TEST(KittiScan, BadFilesAreIoErrors) {
+  const auto dir = test::ScratchDir();
+  {
+    std::ofstream out(dir / "000000.bin", std::ios::binary);
+    out << std::string(20, 'x');
+  }
+  EXPECT_EQ(ErrorOf([&] { ReadKittiScan((dir / "000000.bin").string()); }),
+            (dir / "000000.bin").string() +
+                ": size 20 bytes is not a multiple of 16 (float32 x y z reflectance per point)");
+  { std::ofstream out(dir / "000000.bin", std::ios::binary); }
+  EXPECT_EQ(ErrorOf([&] { ReadKittiScan((dir / "000000.bin").string()); }),
+            (dir / "000000.bin").string() + ": empty scan");
+  EXPECT_EQ(ErrorOf([&] { ReadKittiScan((dir / "nope.bin").string()); }),
+            (dir / "nope.bin").string() + ": no such file");
+}
+
+TEST(KittiScan, PosesByFrameNumberAndCalibration) {
+  const auto dir = test::ScratchDir();
+  const auto scan = SyntheticScan(64, 100, 5.0);
+  WriteScan(dir / "000001.bin", scan);
+  WriteScan(dir / "000003.bin", scan);
+  // Pose N translates by (N, 0, 0) in camera coordinates.
+  std::string poses;
+  for (int n = 0; n < 4; ++n) poses += "1 0 0 " + std::to_string(n) + " 0 1 0 0 0 0 1 0\n";
+  { std::ofstream(dir / "poses.txt") << poses; }
+  auto seq = OpenSequence(dir.string(), SensorConfig{});
+  ASSERT_EQ(seq->Size(), 2u);
+  ASSERT_TRUE(seq->GroundTruth(1).has_value());
+  EXPECT_DOUBLE_EQ(seq->GroundTruth(1)->translation().x(), 3.0);
+  EXPECT_DOUBLE_EQ(seq->GroundTruth(0)->translation().x(), 1.0);
+  // Camera x is velodyne -y under KITTI's Tr (velodyne x forward = camera z).
+  { std::ofstream(dir / "calib.txt") << "P0: 1 0 0 0 0 1 0 0 0 0 1 0\nTr: 0 -1 0 0 0 0 -1 0 1 0 0 0\n"; }
+  seq = OpenSequence(dir.string(), SensorConfig{});
+  EXPECT_NEAR(seq->GroundTruth(1)->translation().y(), -3.0, 1e-12);
+  EXPECT_NEAR(seq->GroundTruth(1)->translation().x(), 0.0, 1e-12);
+  // Too few poses for a scan's frame number.
+  WriteScan(dir / "000009.bin", scan);
+  EXPECT_EQ(ErrorOf([&] { OpenSequence(dir.string(), SensorConfig{}); }),
+            (dir / "poses.txt").string() + ": has 4 poses, scan 000009.bin needs pose 9");
+}
+
+}  // namespace
+}  // namespace planeslam::datasets
