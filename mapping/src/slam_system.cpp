@@ -1,5 +1,6 @@
 #include "planeslam/mapping/slam_system.hpp"
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 
 #include <algorithm>
