@@ -12,6 +12,16 @@ void PlaneMoments::Add(const Eigen::Vector3d& p) {
   sum_sq_.noalias() += q * q.transpose();
 }
 
+PlaneMoments PlaneMoments::FromSums(std::int64_t count, const Eigen::Vector3d& sum,
+                                    const Eigen::Matrix3d& sum_sq,
+                                    const Eigen::Vector3d& reference) {
+  PlaneMoments m(reference);
+  m.count_ = count;
+  m.sum_ = sum;
+  m.sum_sq_ = sum_sq;
+  return m;
+}
+
 void PlaneMoments::Merge(const PlaneMoments& other) {
   if (other.count_ == 0) return;
   if (count_ == 0) {

@@ -29,6 +29,10 @@ class PlaneMoments {
   void Add(const Eigen::Vector3f& p) { Add(Eigen::Vector3d(p.cast<double>())); }
   void Merge(const PlaneMoments& other);
   void Clear() { *this = PlaneMoments(reference_); }
+  /// Moments from raw sums taken relative to `reference`: K, sum (p - ref), sum (p - ref)(p - ref)^T.
+  static PlaneMoments FromSums(std::int64_t count, const Eigen::Vector3d& sum,
+                               const Eigen::Matrix3d& sum_sq,
+                               const Eigen::Vector3d& reference = Eigen::Vector3d::Zero());
 
   std::int64_t count() const { return count_; }
   /// Mass centre S/K in world coordinates.
@@ -39,6 +43,12 @@ class PlaneMoments {
   PlaneFit Fit() const;
   /// MSE of the plane fitted to these moments plus `extra` (without modifying either).
   double MseWith(const PlaneMoments& extra) const;
+  /// Reference point the sums are taken about.
+  const Eigen::Vector3d& reference() const { return reference_; }
+  /// sum (p - reference) [m].
+  const Eigen::Vector3d& sum() const { return sum_; }
+  /// sum (p - reference)(p - reference)^T [m^2].
+  const Eigen::Matrix3d& sum_sq() const { return sum_sq_; }
 
  private:
   Eigen::Vector3d reference_ = Eigen::Vector3d::Zero();

@@ -1,0 +1,117 @@
+#pragma once
+/// Flat, allocation-free moment sums and a closed-form 3x3 symmetric eigen solver: the inner loop of
+/// both region growers (one fit per tested grid or point, paper eq. 5-6).
+///
+/// Sums are kept about the origin in double (K, S = sum p, Q = sum p p^T, 10 doubles). Inputs are
+/// float metres; with |p| < 100 m and K < 10^7 the cancellation in C = Q - S m^T (eq. 6) costs at
+/// most ~1e-16 * K * |p|^2 absolutely, i.e. an MSE error below 1e-12 m^2, far under any threshold
+/// here, so the reference-point shift that PlaneMoments does is not needed in the hot loop.
+#include <Eigen/Core>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+
+#include "planeslam/detection/plane_moments.hpp"
+
+namespace planeslam::detection {
+
+/// Sufficient statistics of a point set plus its noise moment W (used by the depth-dependent
+/// thresholds and the covariance). Plain aggregate: Add/Merge are a few adds.
+///
+/// Noise model: a range sensor errs along the ray. A point p = (z/|r|) r measured with depth (or
+/// range) noise sigma has covariance sigma^2 p p^T / z^2, so its variance along any unit normal n
+/// is (sigma/z)^2 (n.p)^2. Summing w_i p_i p_i^T with w_i = (sigma_i / z_i)^2 gives
+/// W = sum w_i p_i p_i^T, and the expected squared residual of the set about a plane with normal n
+/// is n^T W n / K, for any n, in O(1). This is what makes grazing surfaces (noise mostly along the
+/// surface) and facing surfaces (noise across it) comparable under one threshold.
+struct MomentSums {
+  double k = 0.0;                        ///< point count K
+  double sx = 0, sy = 0, sz = 0;         ///< S = sum p [m]
+  double xx = 0, xy = 0, xz = 0;         ///< Q = sum p p^T [m^2] (upper triangle)
+  double yy = 0, yz = 0, zz = 0;
+  double wxx = 0, wxy = 0, wxz = 0;      ///< W = sum w_i p_i p_i^T [m^2] (noise moment)
+  double wyy = 0, wyz = 0, wzz = 0;
+
+  /// Adds point (x, y, z) whose relative ray noise is w = (sigma / depth)^2 [1].
+  void Add(double x, double y, double z, double w) {
+    k += 1.0;
+    sx += x; sy += y; sz += z;
+    const double xx_ = x * x, xy_ = x * y, xz_ = x * z, yy_ = y * y, yz_ = y * z, zz_ = z * z;
+    xx += xx_; xy += xy_; xz += xz_;
+    yy += yy_; yz += yz_; zz += zz_;
+    wxx += w * xx_; wxy += w * xy_; wxz += w * xz_;
+    wyy += w * yy_; wyz += w * yz_; wzz += w * zz_;
+  }
+  void Merge(const MomentSums& o) {
+    k += o.k;
+    sx += o.sx; sy += o.sy; sz += o.sz;
+    xx += o.xx; xy += o.xy; xz += o.xz;
+    yy += o.yy; yz += o.yz; zz += o.zz;
+    wxx += o.wxx; wxy += o.wxy; wxz += o.wxz;
+    wyy += o.wyy; wyz += o.wyz; wzz += o.wzz;
+  }
+  /// Removes a subset previously added (exact up to round-off).
+  void Subtract(const MomentSums& o) {
+    k -= o.k;
+    sx -= o.sx; sy -= o.sy; sz -= o.sz;
+    xx -= o.xx; xy -= o.xy; xz -= o.xz;
+    yy -= o.yy; yz -= o.yz; zz -= o.zz;
+    wxx -= o.wxx; wxy -= o.wxy; wxz -= o.wxz;
+    wyy -= o.wyy; wyz -= o.wyz; wzz -= o.wzz;
+  }
+  Eigen::Vector3d Centroid() const { return Eigen::Vector3d(sx, sy, sz) / k; }
+  /// n^T W n: summed noise variance of the points along unit normal n [m^2].
+  double NoiseAlong(const Eigen::Vector3d& n) const {
+    return wxx * n.x() * n.x() + wyy * n.y() * n.y() + wzz * n.z() * n.z() +
+           2.0 * (wxy * n.x() * n.y() + wxz * n.x() * n.z() + wyz * n.y() * n.z());
+  }
+  /// Expected MSE of the points about a plane with unit normal n under the noise model [m^2].
+  double ExpectedMse(const Eigen::Vector3d& n) const { return k > 0 ? NoiseAlong(n) / k : 0.0; }
+  /// Mean noise variance in any direction, trace(W)/K (the full ray noise) [m^2].
+  double IsotropicMse() const { return k > 0 ? (wxx + wyy + wzz) / k : 0.0; }
+  /// Expected MSE along a normal n that is itself uncertain by about `tilt` [rad]: the noise
+  /// along n plus the ray noise leaking in through the tilt, sigma_eff = sigma_n + sigma tilt,
+  /// capped at the full ray noise. A 3x3 grid at 4 m has a random normal (tilt ~ 1), so its tests
+  /// see the full noise; a large region's normal is sharp and its tests see only sigma_n.
+  double EffectiveMse(const Eigen::Vector3d& n, double tilt) const {
+    const double iso = IsotropicMse();
+    const double s = std::sqrt(std::max(ExpectedMse(n), 0.0)) +
+                     std::sqrt(iso) * std::min(1.0, std::max(tilt, 0.0));
+    return std::min(s * s, iso);
+  }
+  /// Two-sigma tilt of the normal fitted to these points: 2 sqrt(sigma^2 / l2) [rad].
+  double NormalTilt(double l2) const {
+    return 2.0 * std::sqrt(IsotropicMse() / std::max(l2, 1e-30));
+  }
+  /// C = Q - S m^T (eq. 6) as the upper triangle {c00, c01, c02, c11, c12, c22}.
+  void Scatter(double c[6]) const;
+  /// The same statistics as a PlaneMoments (reference point = origin).
+  PlaneMoments ToPlaneMoments() const;
+};
+
+/// Eigen decomposition of a symmetric 3x3 matrix as needed by plane fitting.
+struct SymEigen3 {
+  double l1 = 0, l2 = 0, l3 = 0;                 ///< eigenvalues, ascending
+  Eigen::Vector3d v1 = Eigen::Vector3d::UnitZ();  ///< unit eigenvector of l1
+};
+
+/// Eigenvalues only (trigonometric closed form, Smith 1961), ascending. `c` = upper triangle.
+void SymEigenvalues3(const double c[6], double& l1, double& l2, double& l3);
+/// Eigenvalues and the eigenvector of the smallest one (cross product of two rows of C - l1 I,
+/// choosing the best-conditioned pair); l1 is then refined as the Rayleigh quotient v1^T C v1,
+/// which is accurate to round-off even when l1 << l3.
+SymEigen3 SymEigen3Smallest(const double c[6]);
+
+/// Plane fitted to moment sums (eq. 3-6): unit normal oriented so that d = n.m >= 0.
+struct FastFit {
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+  double d = 0.0;
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  double l1 = 0, l2 = 0, l3 = 0;  ///< scatter eigenvalues, ascending [m^2]
+  double mse = 0.0;               ///< l1 / K [m^2] (eq. 3)
+};
+/// Fits a plane to `m` (K >= 3 expected; fewer gives mse = 0 and an arbitrary normal).
+FastFit FitSums(const MomentSums& m);
+
+}  // namespace planeslam::detection

@@ -1,0 +1,53 @@
+#pragma once
+/// Grid-based region growing, GBRG (Xiao et al. 2011, Section III).
+///
+/// 1. The range image is cut into k x k grids (paper: 3 x 3); per-grid moments K, S, Q are summed
+///    straight from the cloud in one pass (no per-pixel normals).
+/// 2. Each grid is classified from its scatter eigenvalues l1 <= l2 <= l3: K < mu sparse,
+///    l2 <= alpha l3 linear, l1 <= beta l2 planar, else spherical (Section III-A; with the depth
+///    threshold model a grid whose residual is within the sensor noise is planar too).
+/// 3. Seeds are the unassigned planar grids in order of increasing MSE (a binary min-heap; ties by
+///    grid index, row-major). A region grows breadth-first over 4-neighbour grids (the grid image's
+///    left/right/up/down). 4- rather than 8-neighbours: a diagonal grid touches the region in one
+///    corner pixel only, so it adds no evidence of continuity, and 8-neighbours leak across thin
+///    diagonal edges; every grid of a 4-connected plane is still reached. A candidate g joins when
+///      n_GR . n_g > cos(eta),  |n_GR . (m_GR - m_g)| < gamma,  MSE(GR u g) < epsilon
+///    (Algorithm 2 line 8), and the region's plane is refitted from the merged moments after every
+///    join (eq. 5-6). A rejected grid may be tested again when another of its neighbours joins
+///    (the region's plane has changed since). Regions of >= ceil(theta / k^2) grids are planes;
+///    the grids of smaller (uncertain) regions never seed again but later regions may take them.
+/// 4. Beyond the paper (both optional, on by default): boundary refinement gives each valid pixel
+///    of a grid outside every plane, with a plane among its 8 neighbour grids, to the best-fitting
+///    such plane when |n.p - d| < gamma(z) (with refine_sigmas); then adjacent regions describing
+///    one surface are merged. Final planes are refitted from all their pixels.
+#include <string>
+
+#include "planeslam/detection/detection_config.hpp"
+#include "planeslam/detection/plane_detector.hpp"
+
+namespace planeslam::detection {
+
+/// GBRG-specific parameters (Section III-A).
+struct GridParams {
+  int cell_size = 3;     ///< grid side k [px] (paper: 3)
+  int mu = 0;            ///< min valid points of a non-sparse grid; 0 = k^2 - k + 1 (paper: 7 for 3x3)
+  double alpha = 0.006;  ///< linear when l2 <= alpha l3 (paper value)
+  double beta = 0.4;     ///< planar when l1 <= beta l2 (paper value)
+
+  int EffectiveMu() const { return mu > 0 ? mu : cell_size * cell_size - cell_size + 1; }
+  std::vector<std::string> Validate() const;
+};
+
+class GridRegionGrowing : public PlaneDetector {
+ public:
+  GridRegionGrowing(const DetectionParams& params, const GridParams& grid, std::string name = "");
+  std::string Name() const override { return name_; }
+  Segmentation Detect(const datasets::OrganizedCloud& cloud) const override;
+
+ private:
+  DetectionParams params_;
+  GridParams grid_;
+  std::string name_;
+};
+
+}  // namespace planeslam::detection

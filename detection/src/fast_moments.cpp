@@ -1,0 +1,120 @@
+#include "planeslam/detection/fast_moments.hpp"
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
+
+namespace planeslam::detection {
+
+void MomentSums::Scatter(double c[6]) const {
+  if (k <= 0) {
+    for (int i = 0; i < 6; ++i) c[i] = 0.0;
+    return;
+  }
+  const double inv = 1.0 / k;
+  const double mx = sx * inv, my = sy * inv, mz = sz * inv;
+  // Eq. (6): C = Q - S m^T.
+  c[0] = xx - sx * mx;
+  c[1] = xy - sx * my;
+  c[2] = xz - sx * mz;
+  c[3] = yy - sy * my;
+  c[4] = yz - sy * mz;
+  c[5] = zz - sz * mz;
+}
+
+PlaneMoments MomentSums::ToPlaneMoments() const {
+  Eigen::Matrix3d q;
+  q << xx, xy, xz, xy, yy, yz, xz, yz, zz;
+  return PlaneMoments::FromSums(static_cast<std::int64_t>(std::llround(k)),
+                                Eigen::Vector3d(sx, sy, sz), q);
+}
+
+void SymEigenvalues3(const double c[6], double& l1, double& l2, double& l3) {
+  const double m = (c[0] + c[3] + c[5]) / 3.0;
+  const double b00 = c[0] - m, b11 = c[3] - m, b22 = c[5] - m;
+  const double off = c[1] * c[1] + c[2] * c[2] + c[4] * c[4];
+  const double p = (b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * off) / 6.0;
+  if (p <= 1e-300) {
+    l1 = l2 = l3 = m;
+    return;
+  }
+  // det(B)/2 with B = C - m I; r = det(B/sqrt(p))/2 = cos(3 phi).
+  const double det = b00 * (b11 * b22 - c[4] * c[4]) - c[1] * (c[1] * b22 - c[4] * c[2]) +
+                     c[2] * (c[1] * c[4] - b11 * c[2]);
+  const double sp = std::sqrt(p);
+  double r = det / (2.0 * p * sp);
+  r = std::clamp(r, -1.0, 1.0);
+  const double phi = std::acos(r) / 3.0;
+  const double cphi = std::cos(phi), sphi = std::sin(phi);
+  // cos(phi + 2 pi / 3) = -cos(phi)/2 - sqrt(3)/2 sin(phi)
+  l3 = m + 2.0 * sp * cphi;
+  l1 = m + 2.0 * sp * (-0.5 * cphi - 0.8660254037844386 * sphi);
+  l2 = 3.0 * m - l1 - l3;
+  if (l2 < l1) std::swap(l1, l2);
+  if (l3 < l2) std::swap(l2, l3);
+}
+
+SymEigen3 SymEigen3Smallest(const double c[6]) {
+  SymEigen3 e;
+  SymEigenvalues3(c, e.l1, e.l2, e.l3);
+  const Eigen::Vector3d r0(c[0] - e.l1, c[1], c[2]);
+  const Eigen::Vector3d r1(c[1], c[3] - e.l1, c[4]);
+  const Eigen::Vector3d r2(c[2], c[4], c[5] - e.l1);
+  // The rows of C - l1 I span the plane orthogonal to v1 (rank 2 when l1 < l2): the largest of the
+  // three cross products is the best-conditioned estimate of v1.
+  const Eigen::Vector3d c01 = r0.cross(r1), c02 = r0.cross(r2), c12 = r1.cross(r2);
+  const double n01 = c01.squaredNorm(), n02 = c02.squaredNorm(), n12 = c12.squaredNorm();
+  const double scale = std::max(std::abs(e.l3), std::abs(e.l1));
+  double best = n01;
+  Eigen::Vector3d v = c01;
+  if (n02 > best) { best = n02; v = c02; }
+  if (n12 > best) { best = n12; v = c12; }
+  if (best > 1e-28 * scale * scale * scale * scale && best > 0.0) {
+    e.v1 = v / std::sqrt(best);
+  } else {
+    // l1 ~ l2 (collinear or isotropic points): any unit vector orthogonal to the largest row.
+    Eigen::Vector3d row = r0;
+    if (r1.squaredNorm() > row.squaredNorm()) row = r1;
+    if (r2.squaredNorm() > row.squaredNorm()) row = r2;
+    if (row.squaredNorm() <= 0.0) {
+      e.v1 = Eigen::Vector3d::UnitZ();
+    } else {
+      Eigen::Vector3d any = std::abs(row.x()) < 0.9 ? Eigen::Vector3d::UnitX()
+                                                    : Eigen::Vector3d::UnitY();
+      e.v1 = row.cross(any).normalized();
+    }
+  }
+  // Rayleigh quotient: accurate smallest eigenvalue even when l1 << l3 (the trig form loses it to
+  // cancellation at ~1e-16 l3).
+  const Eigen::Vector3d& v1 = e.v1;
+  const double rq = c[0] * v1.x() * v1.x() + c[3] * v1.y() * v1.y() + c[5] * v1.z() * v1.z() +
+                    2.0 * (c[1] * v1.x() * v1.y() + c[2] * v1.x() * v1.z() + c[4] * v1.y() * v1.z());
+  e.l1 = std::max(0.0, std::min(rq, e.l2));
+  return e;
+}
+
+FastFit FitSums(const MomentSums& m) {
+  FastFit f;
+  if (m.k <= 0) return f;
+  f.centroid = m.Centroid();
+  if (m.k < 3) return f;
+  double c[6];
+  m.Scatter(c);
+  const SymEigen3 e = SymEigen3Smallest(c);
+  f.l1 = e.l1;
+  f.l2 = std::max(0.0, e.l2);
+  f.l3 = std::max(0.0, e.l3);
+  Eigen::Vector3d n = e.v1;
+  double d = n.dot(f.centroid);
+  if (d < 0) {  // Hessian form with d >= 0: n points from the origin towards the plane
+    n = -n;
+    d = -d;
+  }
+  f.normal = n;
+  f.d = d;
+  f.mse = f.l1 / m.k;  // eq. (3)
+  return f;
+}
+
+}  // namespace planeslam::detection

@@ -1,0 +1,348 @@
+#include "planeslam/detection/grid_region_growing.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <functional>
+#include <utility>
+#include <vector>
+
+#include "planeslam/datasets/errors.hpp"
+#include "region_common.hpp"
+
+namespace planeslam::detection {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double Ms(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+/// Plane of one planar grid and its per-grid test tolerances.
+struct CellInfo {
+  Eigen::Vector3d n = Eigen::Vector3d::Zero();  ///< oriented unit normal (d >= 0)
+  Eigen::Vector3d m = Eigen::Vector3d::Zero();  ///< mass centre [m]
+  double mse = 0.0;                             ///< [m^2]
+  double cos_tol = 1.0;  ///< eta test: |n_GR . n_g| must exceed this (-1 = no test)
+  double angle_tol = 0.0;  ///< the same tolerance as an angle [rad]
+};
+
+/// Per-thread buffers reused across frames (no allocation per frame once warmed up).
+struct Workspace {
+  std::vector<MomentSums> sums;
+  std::vector<CellClass> classes;
+  std::vector<CellInfo> info;
+  std::vector<std::int32_t> cell_region;
+  std::vector<std::uint8_t> used;
+  std::vector<std::int32_t> queued;
+  std::vector<int> queue;
+  std::vector<int> members;
+  std::vector<std::pair<double, int>> heap;
+  std::vector<MomentSums> regions;
+  std::vector<FastFit> fits;
+  std::vector<std::int32_t> labels;
+};
+
+Workspace& ThreadWorkspace() {
+  thread_local Workspace ws;
+  return ws;
+}
+
+}  // namespace
+
+std::vector<std::string> GridParams::Validate() const {
+  std::vector<std::string> problems;
+  if (cell_size < 2 || cell_size > 32) problems.push_back("cell_size must be in [2, 32]");
+  if (mu < 0 || mu > cell_size * cell_size)
+    problems.push_back("mu must be in [0, cell_size^2] (0 = automatic)");
+  if (EffectiveMu() < 3) problems.push_back("mu must be >= 3 (a plane needs 3 points)");
+  if (!(alpha > 0 && alpha < 1)) problems.push_back("alpha must be in (0, 1)");
+  if (!(beta > 0 && beta < 1)) problems.push_back("beta must be in (0, 1)");
+  return problems;
+}
+
+GridRegionGrowing::GridRegionGrowing(const DetectionParams& params, const GridParams& grid,
+                                     std::string name)
+    : params_(params), grid_(grid), name_(std::move(name)) {
+  auto problems = params_.Validate();
+  auto more = grid_.Validate();
+  problems.insert(problems.end(), more.begin(), more.end());
+  PLANESLAM_CHECK(problems.empty(), "invalid GBRG parameters: " << problems.front());
+  if (name_.empty()) name_ = "grid" + std::to_string(grid_.cell_size);
+}
+
+Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) const {
+  Segmentation out;
+  const int width = cloud.width, height = cloud.height;
+  PLANESLAM_CHECK(cloud.points.size() == static_cast<std::size_t>(width) * height,
+                  "organized cloud size mismatch");
+  const int k = grid_.cell_size;
+  const int cells_x = (width + k - 1) / k, cells_y = (height + k - 1) / k;
+  const int num_cells = cells_x * cells_y;
+  out.width = width;
+  out.height = height;
+  out.cells_x = cells_x;
+  out.cells_y = cells_y;
+  out.cell_size = k;
+  if (num_cells == 0) return out;
+  const bool spherical = cloud.model == datasets::SensorModel::kSpherical;
+  const bool depth_model = params_.model == ThresholdModel::kDepth;
+  const Eigen::Vector3f* pts = cloud.points.data();
+  Workspace& ws = ThreadWorkspace();
+
+  // ---- 1. Per-grid moments in one pass over the cloud (row by row, so memory is read linearly).
+  const auto t0 = Clock::now();
+  ws.sums.assign(num_cells, MomentSums());
+  const double s0 = params_.sigma0, s2 = params_.sigma_z2;
+  for (int y = 0; y < height; ++y) {
+    const Eigen::Vector3f* row = pts + static_cast<std::size_t>(y) * width;
+    MomentSums* crow = ws.sums.data() + static_cast<std::size_t>(y / k) * cells_x;
+    for (int cx = 0; cx < cells_x; ++cx) {
+      const int x0 = cx * k, x1 = std::min(width, x0 + k);
+      MomentSums acc;
+      for (int x = x0; x < x1; ++x) {
+        const Eigen::Vector3f& p = row[x];
+        if (!std::isfinite(p.z())) continue;
+        const double z = internal::PointDepth(p, spherical);
+        const double rel = (s0 + s2 * z * z) / z;  // sigma(z) / z: relative ray noise
+        acc.Add(p.x(), p.y(), p.z(), rel * rel);
+      }
+      if (acc.k > 0) crow[cx].Merge(acc);
+    }
+  }
+
+  // ---- 2. Shape classification (Section III-A) and the planar grids' planes.
+  const auto t1 = Clock::now();
+  const double mu = grid_.EffectiveMu();
+  const double eta = params_.eta_deg * M_PI / 180.0;
+  const double cos_eta = std::cos(eta);
+  ws.classes.assign(num_cells, CellClass::kSparse);
+  ws.info.resize(num_cells);
+  ws.heap.clear();
+  for (int c = 0; c < num_cells; ++c) {
+    const MomentSums& s = ws.sums[c];
+    if (s.k < mu) continue;  // sparse
+    double scatter[6];
+    s.Scatter(scatter);
+    const SymEigen3 e = SymEigen3Smallest(scatter);
+    if (e.l2 <= grid_.alpha * e.l3) {
+      ws.classes[c] = CellClass::kLinear;
+      continue;
+    }
+    const Eigen::Vector3d m = s.Centroid();
+    const double mse = e.l1 / s.k;
+    const double noise_mse = s.EffectiveMse(e.v1, s.NormalTilt(e.l2));  // sigma_n,rms^2
+    bool planar = e.l1 <= grid_.beta * e.l2;
+    if (!planar && depth_model) {
+      planar = mse <= params_.planar_sigmas * params_.planar_sigmas * noise_mse;
+    }
+    if (!planar) {
+      ws.classes[c] = CellClass::kSpherical;
+      continue;
+    }
+    ws.classes[c] = CellClass::kPlanar;
+    CellInfo& ci = ws.info[c];
+    ci.n = e.v1;
+    if (ci.n.dot(m) < 0) ci.n = -ci.n;
+    ci.m = m;
+    ci.mse = mse;
+    if (depth_model) {
+      // Normal noise of a small grid: std ~ sigma_n / sqrt(l2) [rad].
+      const double ang =
+          eta + params_.eta_sigmas * std::sqrt(noise_mse / std::max(e.l2, 1e-18));
+      ci.angle_tol = ang;
+      ci.cos_tol = ang >= 0.5 * M_PI ? -1.0 : std::cos(ang);
+      // Seed order under the noise model: the paper's minimal MSE, plus the ray noise leaking in
+      // through the grid's normal uncertainty, so that grids whose normal is mostly noise (far
+      // away, where a fluke can give a tiny MSE with a random normal) seed last.
+      const double tilt = std::min(1.0, s.NormalTilt(e.l2));
+      ws.heap.emplace_back(mse + s.IsotropicMse() * tilt * tilt, c);
+    } else {
+      ci.angle_tol = eta;
+      ci.cos_tol = cos_eta;
+      ws.heap.emplace_back(mse, c);  // Algorithm 2 line 4: minimal MSE first
+    }
+  }
+
+  // ---- 3. Region growing (Algorithm 2): seeds from a min-heap of grid MSE, BFS over 4-neighbours.
+  const auto t2 = Clock::now();
+  std::make_heap(ws.heap.begin(), ws.heap.end(), std::greater<>());
+  ws.cell_region.assign(num_cells, -1);
+  ws.used.assign(num_cells, 0);
+  ws.queued.assign(num_cells, -1);
+  ws.regions.clear();
+  const std::size_t theta_grids =
+      static_cast<std::size_t>((params_.theta + k * k - 1) / (k * k));
+  const int dx[4] = {1, -1, 0, 0};
+  const int dy[4] = {0, 0, 1, -1};
+  while (!ws.heap.empty()) {
+    std::pop_heap(ws.heap.begin(), ws.heap.end(), std::greater<>());
+    const int seed = ws.heap.back().second;
+    ws.heap.pop_back();
+    if (ws.used[seed]) continue;  // already in R or R'
+    const int r = static_cast<int>(ws.regions.size());
+    MomentSums region = ws.sums[seed];
+    FastFit fit = FitSums(region);
+    ws.members.clear();
+    ws.members.push_back(seed);
+    ws.cell_region[seed] = r;
+    ws.used[seed] = 1;
+    ws.queue.clear();
+    std::size_t head = 0;
+    auto push_neighbours = [&](int c) {
+      const int cx = c % cells_x, cy = c / cells_x;
+      for (int i = 0; i < 4; ++i) {
+        const int nx = cx + dx[i], ny = cy + dy[i];
+        if (nx < 0 || ny < 0 || nx >= cells_x || ny >= cells_y) continue;
+        const int nb = ny * cells_x + nx;
+        if (ws.classes[nb] != CellClass::kPlanar) continue;
+        if (ws.cell_region[nb] >= 0 || ws.queued[nb] == r) continue;  // in a plane or queued
+        ws.queued[nb] = r;
+        ws.queue.push_back(nb);
+      }
+    };
+    push_neighbours(seed);
+    while (head < ws.queue.size()) {
+      const int g = ws.queue[head++];
+      ws.queued[g] = -1;  // may be queued again by a later neighbour if rejected now
+      if (ws.cell_region[g] >= 0) continue;
+      const CellInfo& ci = ws.info[g];
+      // Algorithm 2 line 8: angle, coplanarity, then the merged MSE (the only one needing a fit).
+      const MomentSums& gs = ws.sums[g];
+      const Eigen::Vector3d diff = fit.centroid - ci.m;
+      const double off = std::abs(fit.normal.dot(diff));
+      double gamma;
+      if (depth_model) {
+        // A young region's own normal is uncertain (tilt, 2 sigma): widen the angle test by it
+        // and let the coplanarity test allow tilt x lateral distance, so that a seed with a
+        // noisy normal corrects itself by growing instead of growing a strip along its error.
+        const double tilt = std::min(1.0, region.NormalTilt(fit.l2));
+        const double dot = std::abs(fit.normal.dot(ci.n));
+        if (tilt > 0.02) {
+          const double ang = ci.angle_tol + tilt;
+          if (ang < 0.5 * M_PI && dot <= std::cos(ang)) continue;
+        } else if (dot <= ci.cos_tol) continue;
+        const double lateral = std::sqrt(std::max(0.0, diff.squaredNorm() - off * off));
+        // Noise of the grid's centre along the region normal: sigma_n / sqrt(K_g).
+        gamma = params_.Gamma(std::sqrt(gs.EffectiveMse(fit.normal, tilt) / gs.k)) +
+                tilt * lateral;
+      } else {
+        if (std::abs(fit.normal.dot(ci.n)) <= ci.cos_tol) continue;
+        gamma = params_.gamma;
+      }
+      if (off >= gamma) continue;
+      MomentSums merged = region;
+      merged.Merge(gs);
+      const FastFit merged_fit = FitSums(merged);
+      const double expected =
+          merged.EffectiveMse(merged_fit.normal, merged.NormalTilt(merged_fit.l2));
+      if (merged_fit.mse >= params_.Epsilon(expected)) continue;
+      region = merged;
+      fit = merged_fit;  // eq. (5): plane parameters updated on every join
+      ws.cell_region[g] = r;
+      ws.used[g] = 1;
+      ws.members.push_back(g);
+      push_neighbours(g);
+    }
+    if (ws.members.size() >= theta_grids) {
+      ws.regions.push_back(region);
+    } else {
+      for (int c : ws.members) ws.cell_region[c] = -1;  // R': not a seed again, but claimable
+    }
+  }
+
+  // ---- 4. Pixel labels; boundary refinement of the grids outside every plane.
+  const auto t3 = Clock::now();
+  ws.labels.assign(static_cast<std::size_t>(width) * height, -1);
+  for (int y = 0; y < height; ++y) {
+    const std::int32_t* creg = ws.cell_region.data() + static_cast<std::size_t>(y / k) * cells_x;
+    std::int32_t* lrow = ws.labels.data() + static_cast<std::size_t>(y) * width;
+    const Eigen::Vector3f* row = pts + static_cast<std::size_t>(y) * width;
+    for (int x = 0; x < width; ++x) {
+      const std::int32_t r = creg[x / k];
+      if (r >= 0 && std::isfinite(row[x].z())) lrow[x] = r;
+    }
+  }
+  if (params_.refine_boundary && !ws.regions.empty()) {
+    // Pixel-level refinement of every grid on a region border (a grid outside every plane with a
+    // plane among its 8 neighbours, or a plane grid with a neighbour outside its plane): each valid
+    // pixel goes to the best-fitting candidate plane (its own and the neighbours') when within
+    // gamma(z) of it, else to none. Interior grids keep all their pixels. Candidate planes are the
+    // ones grown in step 3 (fixed during the pass, so the result does not depend on grid order).
+    // "Best" is the smallest distance in units of the pixel's tolerance gamma + k sigma_n, which
+    // is plane-dependent: sigma_n = sigma(z) |n.p| / z.
+    ws.fits.resize(ws.regions.size());
+    for (std::size_t i = 0; i < ws.regions.size(); ++i) ws.fits[i] = FitSums(ws.regions[i]);
+    const double rs = params_.refine_sigmas;
+    for (int cy = 0; cy < cells_y; ++cy) {
+      for (int cx = 0; cx < cells_x; ++cx) {
+        const int c = cy * cells_x + cx;
+        if (ws.sums[c].k == 0) continue;
+        const int own = ws.cell_region[c];
+        int adj[9];
+        int n_adj = 0;
+        bool interior = own >= 0;
+        for (int oy = -1; oy <= 1; ++oy) {
+          for (int ox = -1; ox <= 1; ++ox) {
+            const int nx = cx + ox, ny = cy + oy;
+            int r = -1;
+            if (nx >= 0 && ny >= 0 && nx < cells_x && ny < cells_y) {
+              r = ws.cell_region[ny * cells_x + nx];
+            }
+            if (r != own) interior = false;
+            if (r < 0) continue;
+            // Insert keeping adj sorted and unique: the lowest region index wins distance ties.
+            int pos = 0;
+            while (pos < n_adj && adj[pos] < r) ++pos;
+            if (pos < n_adj && adj[pos] == r) continue;
+            for (int j = n_adj; j > pos; --j) adj[j] = adj[j - 1];
+            adj[pos] = r;
+            ++n_adj;
+          }
+        }
+        if (interior || n_adj == 0) continue;
+        if (own >= 0) ws.regions[own].Subtract(ws.sums[c]);  // its pixels are re-assigned below
+        const int y1 = std::min(height, (cy + 1) * k), x1 = std::min(width, (cx + 1) * k);
+        for (int y = cy * k; y < y1; ++y) {
+          for (int x = cx * k; x < x1; ++x) {
+            const std::size_t idx = static_cast<std::size_t>(y) * width + x;
+            const Eigen::Vector3f& pf = pts[idx];
+            if (!std::isfinite(pf.z())) continue;
+            const Eigen::Vector3d p = pf.cast<double>();
+            const double z = internal::PointDepth(pf, spherical);
+            const double rel = params_.Sigma(z) / z;
+            int best = -1;
+            double best_ratio = 1.0;
+            for (int i = 0; i < n_adj; ++i) {
+              const FastFit& f = ws.fits[adj[i]];
+              const double np = f.normal.dot(p);
+              const double tol =
+                  depth_model ? params_.gamma + rs * rel * std::abs(np) : params_.gamma;
+              const double ratio = std::abs(np - f.d) / tol;
+              if (ratio < best_ratio) {
+                best_ratio = ratio;
+                best = adj[i];
+              }
+            }
+            ws.labels[idx] = best;
+            if (best >= 0) ws.regions[best].Add(p.x(), p.y(), p.z(), rel * rel);
+          }
+        }
+      }
+    }
+  }
+
+  // ---- 5. Merge adjacent regions that are one surface; final planes from all their pixels.
+  const auto t4 = Clock::now();
+  if (params_.merge_regions) {
+    internal::MergeAdjacentRegions(ws.labels, width, height, ws.regions, params_);
+  }
+  internal::FinalizeSegmentation(ws.labels, width, height, ws.regions, out);
+  out.cell_classes = ws.classes;
+  const auto t5 = Clock::now();
+  out.timings_ms = {{"moments", Ms(t0, t1)}, {"classify", Ms(t1, t2)}, {"grow", Ms(t2, t3)},
+                    {"refine", Ms(t3, t4)},  {"finalize", Ms(t4, t5)}};
+  return out;
+}
+
+}  // namespace planeslam::detection

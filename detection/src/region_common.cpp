@@ -1,0 +1,134 @@
+#include "region_common.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <tuple>
+
+#include "planeslam/detection/plane_covariance.hpp"
+
+namespace planeslam::detection::internal {
+namespace {
+
+int Find(std::vector<int>& parent, int a) {
+  while (parent[a] != a) {
+    parent[a] = parent[parent[a]];
+    a = parent[a];
+  }
+  return a;
+}
+
+}  // namespace
+
+void MergeAdjacentRegions(std::vector<std::int32_t>& labels, int width, int height,
+                          std::vector<MomentSums>& regions, const DetectionParams& params) {
+  const int n = static_cast<int>(regions.size());
+  if (n < 2) return;
+  // Adjacent pairs from right and down neighbours, packed into 64-bit keys, sorted unique.
+  std::vector<std::uint64_t> pairs;
+  for (int y = 0; y < height; ++y) {
+    const std::int32_t* row = labels.data() + static_cast<std::size_t>(y) * width;
+    const std::int32_t* below = y + 1 < height ? row + width : nullptr;
+    for (int x = 0; x < width; ++x) {
+      const std::int32_t a = row[x];
+      if (a < 0) continue;
+      if (x + 1 < width && row[x + 1] >= 0 && row[x + 1] != a) {
+        const auto lo = static_cast<std::uint64_t>(std::min(a, row[x + 1]));
+        const auto hi = static_cast<std::uint64_t>(std::max(a, row[x + 1]));
+        pairs.push_back(lo << 32 | hi);
+      }
+      if (below && below[x] >= 0 && below[x] != a) {
+        const auto lo = static_cast<std::uint64_t>(std::min(a, below[x]));
+        const auto hi = static_cast<std::uint64_t>(std::max(a, below[x]));
+        pairs.push_back(lo << 32 | hi);
+      }
+    }
+  }
+  if (pairs.empty()) return;
+  std::sort(pairs.begin(), pairs.end());
+  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+
+  const double cos_merge = std::cos(params.merge_angle_deg * M_PI / 180.0);
+  std::vector<FastFit> fits(n);
+  for (int i = 0; i < n; ++i) fits[i] = FitSums(regions[i]);
+  // Candidate pairs ordered by the MSE of their union (the most obviously one surface first).
+  std::vector<std::tuple<double, int, int>> cand;
+  for (std::uint64_t key : pairs) {
+    const int a = static_cast<int>(key >> 32), b = static_cast<int>(key & 0xffffffffu);
+    if (regions[a].k < 3 || regions[b].k < 3) continue;
+    if (std::abs(fits[a].normal.dot(fits[b].normal)) < cos_merge) continue;
+    MomentSums u = regions[a];
+    u.Merge(regions[b]);
+    const FastFit fu = FitSums(u);
+    if (fu.mse < params.Epsilon(u.ExpectedMse(fu.normal))) cand.emplace_back(fu.mse, a, b);
+  }
+  if (cand.empty()) return;
+  std::sort(cand.begin(), cand.end());
+  std::vector<int> parent(n);
+  std::iota(parent.begin(), parent.end(), 0);
+  bool merged_any = false;
+  for (const auto& [mse0, a0, b0] : cand) {
+    (void)mse0;
+    int a = Find(parent, a0), b = Find(parent, b0);
+    if (a == b) continue;
+    if (b < a) std::swap(a, b);
+    // Re-test with the current (possibly already merged) regions.
+    const FastFit fa = FitSums(regions[a]), fb = FitSums(regions[b]);
+    if (std::abs(fa.normal.dot(fb.normal)) < cos_merge) continue;
+    MomentSums u = regions[a];
+    u.Merge(regions[b]);
+    const FastFit fu = FitSums(u);
+    if (fu.mse >= params.Epsilon(u.ExpectedMse(fu.normal))) continue;
+    regions[a] = u;
+    regions[b] = MomentSums();
+    parent[b] = a;
+    merged_any = true;
+  }
+  if (!merged_any) return;
+  for (auto& l : labels) {
+    if (l >= 0) l = Find(parent, l);
+  }
+}
+
+void FinalizeSegmentation(const std::vector<std::int32_t>& region_labels, int width, int height,
+                          const std::vector<MomentSums>& regions, Segmentation& out) {
+  out.width = width;
+  out.height = height;
+  const int n = static_cast<int>(regions.size());
+  std::vector<int> order;
+  order.reserve(n);
+  for (int i = 0; i < n; ++i) {
+    if (regions[i].k >= 3) order.push_back(i);
+  }
+  std::stable_sort(order.begin(), order.end(),
+                   [&](int a, int b) { return regions[a].k > regions[b].k; });
+  std::vector<std::int32_t> id_of(n, -1);
+  out.planes.clear();
+  out.planes.reserve(order.size());
+  for (int r : order) {
+    const MomentSums& s = regions[r];
+    const FastFit f = FitSums(s);
+    Plane p;
+    p.id = static_cast<int>(out.planes.size()) + 1;
+    p.normal = f.normal;
+    p.d = f.d;
+    p.centroid = f.centroid;
+    p.point_count = static_cast<std::int64_t>(std::llround(s.k));
+    p.mse = f.mse;
+    p.eigenvalues = Eigen::Vector3d(f.l1, f.l2, f.l3);
+    p.moments = s.ToPlaneMoments();
+    // Per-point variance along the normal: the sensor model's expected MSE of the region's
+    // points, or the observed MSE when larger (unmodelled roughness), never below (0.1 mm)^2.
+    const double sigma2 = std::max({s.ExpectedMse(f.normal), f.mse, 1e-8});
+    p.covariance = PlaneCovariance(p.moments, p.normal, sigma2);
+    id_of[r] = p.id;
+    out.planes.push_back(std::move(p));
+  }
+  out.labels.resize(region_labels.size());
+  for (std::size_t i = 0; i < region_labels.size(); ++i) {
+    const std::int32_t r = region_labels[i];
+    out.labels[i] = r >= 0 ? id_of[r] : -1;
+  }
+}
+
+}  // namespace planeslam::detection::internal

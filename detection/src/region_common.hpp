@@ -1,0 +1,32 @@
+#pragma once
+// Machinery shared by GBRG and PBRG after growth: merging adjacent coplanar regions and turning
+// region sums + a region-index image into a Segmentation (planes sorted by size, ids 1..N).
+#include <cstdint>
+#include <vector>
+
+#include "planeslam/datasets/organized_cloud.hpp"
+#include "planeslam/detection/detection_config.hpp"
+#include "planeslam/detection/fast_moments.hpp"
+#include "planeslam/detection/plane.hpp"
+
+namespace planeslam::detection::internal {
+
+/// Depth used by the noise model: z for a pinhole camera, range for a spherical scanner.
+inline float PointDepth(const Eigen::Vector3f& p, bool spherical) {
+  return spherical ? p.norm() : p.z();
+}
+
+/// Merges adjacent regions (4-connected in the label image) that describe one surface: normals
+/// within merge_angle_deg and MSE of the union below epsilon (of the union's noise). Pairs are
+/// tried in order of increasing union MSE (deterministic; ties by region indices); a merged region
+/// keeps the smaller index. `labels` holds region indices (-1 none) and is rewritten; merged-away
+/// regions get k = 0 in `regions`.
+void MergeAdjacentRegions(std::vector<std::int32_t>& labels, int width, int height,
+                          std::vector<MomentSums>& regions, const DetectionParams& params);
+
+/// Builds the output: one Plane per region with k >= 3 (sorted by point count descending, then by
+/// region index), labels rewritten to plane ids (>= 1) or -1, covariance from the region noise.
+void FinalizeSegmentation(const std::vector<std::int32_t>& region_labels, int width, int height,
+                          const std::vector<MomentSums>& regions, Segmentation& out);
+
+}  // namespace planeslam::detection::internal

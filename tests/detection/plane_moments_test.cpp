@@ -1,0 +1,179 @@
+#include <gtest/gtest.h>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+
+#include <random>
+
+#include "planeslam/detection/fast_moments.hpp"
+#include "planeslam/detection/plane_covariance.hpp"
+#include "planeslam/detection/plane_moments.hpp"
+
+namespace planeslam::detection {
+namespace {
+
+std::vector<Eigen::Vector3d> NoisyPlanePoints(int n, unsigned seed, double noise,
+                                              const Eigen::Vector3d& normal, double d) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> uni(-1.0, 1.0);
+  std::normal_distribution<double> gauss(0.0, noise);
+  const Eigen::Vector3d nn = normal.normalized();
+  const Eigen::Vector3d a = nn.unitOrthogonal(), b = nn.cross(a);
+  std::vector<Eigen::Vector3d> pts;
+  for (int i = 0; i < n; ++i) {
+    pts.push_back(nn * (d + (noise > 0 ? gauss(rng) : 0.0)) + 1.5 * uni(rng) * a + 0.7 * uni(rng) * b);
+  }
+  return pts;
+}
+
+double RelDiff(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
+  return (a - b).norm() / std::max(1e-300, b.norm());
+}
+
+TEST(PlaneMoments, MergeEqualsMomentsOfUnion) {
+  const auto p1 = NoisyPlanePoints(500, 1, 0.01, Eigen::Vector3d(0.2, 0.3, 1), 3.0);
+  const auto p2 = NoisyPlanePoints(300, 2, 0.02, Eigen::Vector3d(1, 0, 0.1), 10.0);
+  PlaneMoments a, b, all;
+  for (const auto& p : p1) a.Add(p);
+  for (const auto& p : p2) b.Add(p);
+  for (const auto& p : p1) all.Add(p);
+  for (const auto& p : p2) all.Add(p);
+  PlaneMoments merged = a;
+  merged.Merge(b);
+  EXPECT_EQ(merged.count(), all.count());
+  EXPECT_LT(RelDiff(merged.Centroid(), all.Centroid()), 1e-9);
+  EXPECT_LT(RelDiff(merged.Scatter(), all.Scatter()), 1e-9);
+  // The flat sums agree with PlaneMoments and merge the same way.
+  MomentSums sa, sb, sall;
+  for (const auto& p : p1) sa.Add(p.x(), p.y(), p.z(), 0.0);
+  for (const auto& p : p2) sb.Add(p.x(), p.y(), p.z(), 0.0);
+  for (const auto& p : p1) sall.Add(p.x(), p.y(), p.z(), 0.0);
+  for (const auto& p : p2) sall.Add(p.x(), p.y(), p.z(), 0.0);
+  sa.Merge(sb);
+  double ca[6], call[6];
+  sa.Scatter(ca);
+  sall.Scatter(call);
+  for (int i = 0; i < 6; ++i) EXPECT_NEAR(ca[i], call[i], 1e-9 * std::abs(call[0]));
+  EXPECT_LT(RelDiff(sa.ToPlaneMoments().Scatter(), all.Scatter()), 1e-9);
+}
+
+TEST(PlaneMoments, FitRecoversExactPlaneAndMseIsEigenvalueOverK) {
+  const Eigen::Vector3d n = Eigen::Vector3d(0.3, -0.2, 1).normalized();
+  const auto pts = NoisyPlanePoints(1000, 3, 0.0, n, 2.5);
+  PlaneMoments m;
+  for (const auto& p : pts) m.Add(p);
+  const PlaneFit fit = m.Fit();
+  ASSERT_TRUE(fit.valid);
+  EXPECT_NEAR(fit.normal.dot(n), 1.0, 1e-12);
+  EXPECT_NEAR(fit.d, 2.5, 1e-12);
+  EXPECT_NEAR(fit.mse, 0.0, 1e-14);
+  // Noisy: MSE = lambda_min / K equals the mean squared residual of eq. (1).
+  const auto noisy = NoisyPlanePoints(1000, 4, 0.01, n, 2.5);
+  PlaneMoments mn;
+  for (const auto& p : noisy) mn.Add(p);
+  const PlaneFit f2 = mn.Fit();
+  double sq = 0;
+  for (const auto& p : noisy) sq += std::pow(f2.normal.dot(p) - f2.d, 2);
+  EXPECT_NEAR(f2.mse, sq / noisy.size(), 1e-12);
+  EXPECT_NEAR(std::sqrt(f2.mse), 0.01, 0.001);
+}
+
+TEST(FastMoments, EigenSolverMatchesEigen) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> uni(-1, 1);
+  for (int trial = 0; trial < 2000; ++trial) {
+    Eigen::Matrix3d a = Eigen::Matrix3d::NullaryExpr([&] { return uni(rng); });
+    Eigen::Matrix3d c = a * a.transpose();
+    if (trial % 3 == 0) {  // plane-like: one tiny eigenvalue
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(c);
+      Eigen::Vector3d ev = es.eigenvalues();
+      ev(0) = ev(2) * 1e-9;
+      c = es.eigenvectors() * ev.asDiagonal() * es.eigenvectors().transpose();
+    }
+    const double u[6] = {c(0, 0), c(0, 1), c(0, 2), c(1, 1), c(1, 2), c(2, 2)};
+    const SymEigen3 e = SymEigen3Smallest(u);
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ref(c);
+    const double scale = ref.eigenvalues()(2);
+    EXPECT_NEAR(e.l1, ref.eigenvalues()(0), 1e-9 * scale);
+    EXPECT_NEAR(e.l2, ref.eigenvalues()(1), 1e-9 * scale);
+    EXPECT_NEAR(e.l3, ref.eigenvalues()(2), 1e-9 * scale);
+    const double gap = ref.eigenvalues()(1) - ref.eigenvalues()(0);
+    if (gap > 1e-3 * scale) {
+      EXPECT_NEAR(std::abs(e.v1.dot(ref.eigenvectors().col(0))), 1.0, 1e-8);
+    }
+  }
+}
+
+TEST(FastMoments, IncrementalFitEqualsBatchFit) {
+  const auto pts = NoisyPlanePoints(400, 6, 0.005, Eigen::Vector3d(0.1, 0.9, 0.3), 1.2);
+  MomentSums inc;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    inc.Add(pts[i].x(), pts[i].y(), pts[i].z(), 0.0);
+    if (i < 3) continue;
+    // Batch fit of the first i+1 points with Eigen's general solver.
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (std::size_t j = 0; j <= i; ++j) mean += pts[j];
+    mean /= static_cast<double>(i + 1);
+    Eigen::Matrix3d c = Eigen::Matrix3d::Zero();
+    for (std::size_t j = 0; j <= i; ++j) c += (pts[j] - mean) * (pts[j] - mean).transpose();
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(c);
+    Eigen::Vector3d n = es.eigenvectors().col(0);
+    if (n.dot(mean) < 0) n = -n;
+    const FastFit f = FitSums(inc);
+    EXPECT_NEAR(f.normal.dot(n), 1.0, 1e-9) << i;
+    EXPECT_NEAR(f.d, n.dot(mean), 1e-9) << i;
+    EXPECT_NEAR(f.mse, es.eigenvalues()(0) / (i + 1), 1e-12) << i;
+  }
+}
+
+TEST(PlaneCovariance, RankThreePsdNullAlongNormalAndScalesWithNoise) {
+  const Eigen::Vector3d n = Eigen::Vector3d(0.2, 0.1, 1).normalized();
+  const auto pts = NoisyPlanePoints(2000, 7, 0.0, n, 3.0);
+  PlaneMoments m;
+  for (const auto& p : pts) m.Add(p);
+  const PlaneFit fit = m.Fit();
+  const Eigen::Matrix4d cov = PlaneCovariance(m, fit.normal, 1e-4);
+  EXPECT_LT((cov - cov.transpose()).norm(), 1e-15);
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d> es(cov);
+  EXPECT_GT(es.eigenvalues()(0), -1e-15);
+  EXPECT_LT(es.eigenvalues()(0), 1e-12 * es.eigenvalues()(3));  // rank 3
+  EXPECT_GT(es.eigenvalues()(1), 0.0);
+  Eigen::Vector4d null;
+  null << fit.normal, 0.0;
+  EXPECT_LT((cov * null).norm(), 1e-12 * cov.norm());
+  const Eigen::Matrix4d cov2 = PlaneCovariance(m, fit.normal, 4e-4);
+  EXPECT_LT((cov2 - 4.0 * cov).norm(), 1e-12 * cov2.norm());
+}
+
+TEST(PlaneCovariance, MatchesMonteCarloSpreadOfFits) {
+  // Oracle: fit many noisy draws of the same patch; the sample covariance of (n, d) must agree
+  // with the predicted one (sigma^2 known).
+  const Eigen::Vector3d n = Eigen::Vector3d(0.3, -0.1, 1).normalized();
+  const double sigma = 0.01, d = 2.0;
+  const auto clean = NoisyPlanePoints(200, 8, 0.0, n, d);
+  std::mt19937 rng(9);
+  std::normal_distribution<double> gauss(0.0, sigma);
+  std::vector<Eigen::Vector4d> samples;
+  PlaneMoments clean_m;
+  for (const auto& p : clean) clean_m.Add(p);
+  for (int t = 0; t < 3000; ++t) {
+    PlaneMoments m;
+    for (const auto& p : clean) m.Add(Eigen::Vector3d(p + n * gauss(rng)));
+    const PlaneFit f = m.Fit();
+    Eigen::Vector4d s;
+    s << f.normal, f.d;
+    samples.push_back(s);
+  }
+  Eigen::Vector4d mean = Eigen::Vector4d::Zero();
+  for (const auto& s : samples) mean += s;
+  mean /= samples.size();
+  Eigen::Matrix4d emp = Eigen::Matrix4d::Zero();
+  for (const auto& s : samples) emp += (s - mean) * (s - mean).transpose();
+  emp /= samples.size() - 1;
+  const Eigen::Matrix4d pred = PlaneCovariance(clean_m, clean_m.Fit().normal, sigma * sigma);
+  EXPECT_LT((emp - pred).norm(), 0.1 * pred.norm());
+  EXPECT_NEAR(emp(3, 3), pred(3, 3), 0.15 * pred(3, 3));
+}
+
+}  // namespace
+}  // namespace planeslam::detection
