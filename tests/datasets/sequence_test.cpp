@@ -182,6 +182,116 @@ TEST(TumSequence, IntrinsicsFileIsStrict) {
   EXPECT_EQ(OpenSequence(dir.string(), config)->Load(0).cloud.CountValid(), 12u);
 }
 
+// ---------------------------------------------------------------------------------------------
+// ICL-NUIM layout, synthesized: a tilted world plane seen from two poses through ICL's camera,
+// whose ground truth is expressed for a y-up camera frame (image row v maps to -y).
+
+struct IclScene {
+  Eigen::Vector3d n = Eigen::Vector3d(0.2, 0.9, -0.3).normalized();  // world plane n.p = d
+  double d = -1.5;
+  std::vector<Pose> poses;
+};
+
+fs::path MakeIclFolder(const fs::path& dir, IclScene* scene) {
+  fs::create_directories(dir / "depth");
+  const double fx = 481.2, fy = 480.0, cx = 319.5, cy = 239.5;
+  Pose a = Pose::Identity();
+  a.translation() = Eigen::Vector3d(0.1, -0.2, 0.3);
+  a.linear() = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 0.5).normalized()).toRotationMatrix();
+  Pose b = Pose::Identity();
+  b.translation() = Eigen::Vector3d(0.5, 0.1, -0.2);
+  b.linear() = Eigen::AngleAxisd(-0.4, Eigen::Vector3d(0.3, 1, -1).normalized()).toRotationMatrix();
+  scene->poses = {a, b};
+  std::string assoc, gt;
+  for (int k = 0; k < 2; ++k) {
+    const Pose& T = scene->poses[k];
+    Image16 depth(640, 480);
+    for (int v = 0; v < 480; ++v) {
+      for (int u = 0; u < 640; ++u) {
+        // ICL camera frame: x right, y up (hence the minus), z forward.
+        const Eigen::Vector3d ray((u - cx) / fx, -(v - cy) / fy, 1.0);
+        const double denom = scene->n.dot(T.linear() * ray);
+        const double z = (scene->d - scene->n.dot(T.translation())) / denom;
+        if (z > 0.3 && z < 10.0) depth.data[v * 640 + u] = static_cast<std::uint16_t>(std::lround(z * 5000));
+      }
+    }
+    WritePng16((dir / "depth" / (std::to_string(k) + ".png")).string(), depth);
+    assoc += std::to_string(k) + " depth/" + std::to_string(k) + ".png " + std::to_string(k) +
+             " rgb/" + std::to_string(k) + ".png\n";
+    const Eigen::Quaterniond q(T.linear());
+    char line[256];
+    std::snprintf(line, sizeof(line), "%d %.9f %.9f %.9f %.9f %.9f %.9f %.9f\n", k,
+                  T.translation().x(), T.translation().y(), T.translation().z(), q.x(), q.y(),
+                  q.z(), q.w());
+    gt += line;
+  }
+  WriteText(dir / "associations.txt", assoc);
+  WriteText(dir / "groundtruth.txt", gt);
+  return dir;
+}
+
+// Largest |n.p - d| over the valid points of a frame mapped to the world by its ground truth.
+double WorldPlaneResidual(const Frame& f, const IclScene& scene) {
+  double worst = 0;
+  std::size_t n = 0;
+  for (const auto& p : f.cloud.points) {
+    if (!OrganizedCloud::IsValid(p)) continue;
+    const Eigen::Vector3d w = *f.T_world_sensor_gt * p.cast<double>();
+    worst = std::max(worst, std::abs(scene.n.dot(w) - scene.d));
+    ++n;
+  }
+  EXPECT_GT(n, 100000u);
+  return worst;
+}
+
+TEST(IclSequence, GroundTruthAgreesWithBackProjectedDepth) {
+  IclScene scene;
+  const auto dir = MakeIclFolder(test::ScratchDir(), &scene);
+  const auto seq = OpenSequence(dir.string(), SensorConfig{});
+  ASSERT_EQ(seq->Size(), 2u);
+  for (std::size_t k = 0; k < 2; ++k) {
+    const Frame f = seq->Load(k);
+    EXPECT_DOUBLE_EQ(f.timestamp, static_cast<double>(k));
+    ASSERT_TRUE(f.T_world_sensor_gt.has_value());
+    EXPECT_TRUE(f.T_world_sensor_gt->isApprox(scene.poses[k], 1e-6));
+    // Depth is quantised to 0.2 mm; the plane is at most ~4 m away.
+    EXPECT_LT(WorldPlaneResidual(f, scene), 2e-3) << "frame " << k;
+  }
+  // Without the flip (fy = +480) the same poses put the two frames' clouds off the plane.
+  SensorConfig unflipped;
+  unflipped.intrinsics_source = "config";
+  unflipped.intrinsics = {640, 480, 481.2, 480.0, 319.5, 239.5};
+  const auto wrong = OpenSequence(dir.string(), unflipped);
+  EXPECT_GT(WorldPlaneResidual(wrong->Load(0), scene), 0.1);
+  // The same folder through the config: flip_y reproduces the automatic choice.
+  unflipped.flip_y = true;
+  EXPECT_LT(WorldPlaneResidual(OpenSequence(dir.string(), unflipped)->Load(1), scene), 2e-3);
+}
+
+TEST(IclSequence, IntrinsicsFileWithFlip) {
+  IclScene scene;
+  const auto dir = MakeIclFolder(test::ScratchDir(), &scene);
+  WriteText(dir / "intrinsics.yaml",
+            "width: 640\nheight: 480\nfx: 481.2\nfy: 480\ncx: 319.5\ncy: 239.5\n"
+            "depth_scale: 5000\nflip_y: true\n");
+  const auto seq = OpenIclSequence(dir.string(), SensorConfig{});
+  EXPECT_DOUBLE_EQ(seq->intrinsics().fy, -480.0);
+  EXPECT_LT(WorldPlaneResidual(seq->Load(0), scene), 2e-3);
+  // ICL's own .K file writes fy negative; that spelling works too.
+  WriteText(dir / "intrinsics.yaml",
+            "width: 640\nheight: 480\nfx: 481.2\nfy: -480\ncx: 319.5\ncy: 239.5\n"
+            "depth_scale: 5000\n");
+  EXPECT_LT(WorldPlaneResidual(OpenIclSequence(dir.string(), SensorConfig{})->Load(1), scene), 2e-3);
+}
+
+TEST(IclSequence, MissingDepthNamesLine) {
+  IclScene scene;
+  const auto dir = MakeIclFolder(test::ScratchDir(), &scene);
+  fs::remove(dir / "depth" / "1.png");
+  EXPECT_EQ(ErrorOf([&] { OpenSequence(dir.string(), SensorConfig{}); }),
+            (dir / "associations.txt").string() + ":2: names 'depth/1.png' which does not exist");
+}
+
 TEST(SequenceFactory, MissingAndEmptyFolders) {
   const auto dir = test::ScratchDir();
   EXPECT_EQ(ErrorOf([&] { OpenSequence((dir / "nope").string(), SensorConfig{}); }),
