@@ -1,0 +1,131 @@
+// OctoMap output: a wall seen from a known pose is occupied, the space in front free, behind it
+// unknown, in the map built and in the .bt file read back by OctoMap.
+#include "planeslam/mapping/occupancy_map.hpp"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <limits>
+
+#include "planeslam/datasets/errors.hpp"
+#include "test_support.hpp"
+
+#ifdef PLANESLAM_HAVE_OCTOMAP
+#include <octomap/OcTree.h>
+#endif
+
+namespace planeslam::mapping {
+namespace {
+
+/// A 2 x 2 m wall at sensor z = `depth`, points every 1 cm, plus a NaN.
+std::vector<Eigen::Vector3f> Wall(float depth) {
+  std::vector<Eigen::Vector3f> pts;
+  for (int i = 0; i < 200; ++i) {
+    for (int j = 0; j < 200; ++j) pts.emplace_back(-1.0f + 0.01f * i, -1.0f + 0.01f * j, depth);
+  }
+  pts.emplace_back(Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN()));
+  return pts;
+}
+
+Pose SomePose() {
+  Pose T = Pose::Identity();
+  T.linear() = Eigen::AngleAxisd(0.4, Eigen::Vector3d(0.2, 1.0, -0.3).normalized()).toRotationMatrix();
+  T.translation() = Eigen::Vector3d(1.5, -2.0, 0.7);
+  return T;
+}
+
+TEST(OccupancyMap, ConfigValidation) {
+  EXPECT_TRUE(OccupancyMapConfig().Validate().empty());
+  OccupancyMapConfig c;
+  c.prob_hit = 0.4;
+  c.resolution = 0;
+  EXPECT_EQ(c.Validate().size(), 2u);
+  EXPECT_THROW(OccupancyMapBuilder{c}, CheckError);
+}
+
+TEST(OccupancyMap, VoxelDownsampleKeepsOneCentroidPerVoxel) {
+  const auto pts = Wall(2.0f);
+  const auto down = VoxelDownsample(pts, 0.1);
+  // 2 x 2 m in 10 cm voxels at one depth: 20 x 20 voxels (2.0 / 0.1 is a voxel boundary).
+  EXPECT_EQ(down.size(), 400u);
+  for (const auto& p : down) {
+    EXPECT_NEAR(p.z(), 2.0f, 1e-5f);
+    // A voxel's centroid of a 1 cm lattice lies at the voxel centre within half a spacing.
+    const double cx = (std::floor(p.x() / 0.1) + 0.5) * 0.1;
+    EXPECT_NEAR(p.x(), cx, 0.0051);
+  }
+  EXPECT_THROW(VoxelDownsample(pts, 0.0), CheckError);
+}
+
+TEST(OccupancyMap, WallIsOccupiedFrontFreeBehindUnknownAndSurvivesTheFile) {
+  const auto dir = test::ScratchDir();
+  const std::string path = (dir / "map.bt").string();
+  OccupancyMapConfig config;
+  config.resolution = 0.05;
+  OccupancyMapBuilder builder(config);
+  if (!OccupancyMapBuilder::available()) {
+    EXPECT_THROW(builder.Write(path), IoError);
+    GTEST_SKIP() << "built without OctoMap";
+  }
+  const Pose T = SomePose();
+  builder.Insert(Wall(2.0f), T);
+  const Eigen::Vector3d on_wall = T * Eigen::Vector3d(0.1, 0.1, 2.0);
+  const Eigen::Vector3d in_front = T * Eigen::Vector3d(0.1, 0.1, 1.0);
+  const Eigen::Vector3d behind = T * Eigen::Vector3d(0.1, 0.1, 2.5);
+  EXPECT_EQ(builder.Query(on_wall), Occupancy::kOccupied);
+  EXPECT_EQ(builder.Query(in_front), Occupancy::kFree);
+  EXPECT_EQ(builder.Query(behind), Occupancy::kUnknown);
+  const OccupancyMapStats stats = builder.Stats();
+  EXPECT_EQ(stats.inserted_frames, 1u);
+  EXPECT_EQ(stats.inserted_points, 40u * 40u);  // 5 cm downsampling of the 2 x 2 m wall
+  // The wall is about 40 x 40 leaves (a tilted plane can cover up to ~2x as many voxels).
+  EXPECT_GT(stats.occupied_leaves, 1400u);
+  EXPECT_LT(stats.occupied_leaves, 4000u);
+  EXPECT_GT(stats.free_leaves, 0u);
+
+  builder.Write(path);
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+    EXPECT_EQ(entry.path().filename(), "map.bt");  // no temporary file left
+  }
+  const OccupancyMapBuilder loaded = OccupancyMapBuilder::Load(path);
+  EXPECT_DOUBLE_EQ(loaded.resolution(), 0.05);
+  EXPECT_EQ(loaded.Query(on_wall), Occupancy::kOccupied);
+  EXPECT_EQ(loaded.Query(in_front), Occupancy::kFree);
+  EXPECT_EQ(loaded.Query(behind), Occupancy::kUnknown);
+  EXPECT_EQ(loaded.Stats().occupied_leaves + loaded.Stats().free_leaves > 0, true);
+
+#ifdef PLANESLAM_HAVE_OCTOMAP
+  // And with OctoMap's own reader directly.
+  octomap::OcTree tree(0.1);
+  ASSERT_TRUE(tree.readBinary(path));
+  EXPECT_DOUBLE_EQ(tree.getResolution(), 0.05);
+  const octomap::OcTreeNode* node = tree.search(on_wall.x(), on_wall.y(), on_wall.z());
+  ASSERT_NE(node, nullptr);
+  EXPECT_TRUE(tree.isNodeOccupied(node));
+#endif
+}
+
+TEST(OccupancyMap, RaysBeyondMaxRangeOnlyClearUpToIt) {
+  if (!OccupancyMapBuilder::available()) GTEST_SKIP() << "built without OctoMap";
+  OccupancyMapConfig config;
+  config.max_range = 3.0;
+  OccupancyMapBuilder builder(config);
+  builder.Insert(Wall(4.0f), Pose::Identity());
+  EXPECT_EQ(builder.Query(Eigen::Vector3d(0.1, 0.1, 4.0)), Occupancy::kUnknown);
+  EXPECT_EQ(builder.Query(Eigen::Vector3d(0.1, 0.1, 2.5)), Occupancy::kFree);
+  EXPECT_EQ(builder.Query(Eigen::Vector3d(0.1, 0.1, 3.5)), Occupancy::kUnknown);
+  EXPECT_EQ(builder.Stats().occupied_leaves, 0u);
+}
+
+TEST(OccupancyMap, LoadRejectsOtherFiles) {
+  if (!OccupancyMapBuilder::available()) GTEST_SKIP() << "built without OctoMap";
+  const auto dir = test::ScratchDir();
+  const std::string path = (dir / "not.bt").string();
+  std::ofstream(path) << "ply\nformat ascii 1.0\n";
+  EXPECT_THROW(OccupancyMapBuilder::Load(path), IoError);
+  EXPECT_THROW(OccupancyMapBuilder::Load((dir / "missing.bt").string()), IoError);
+}
+
+}  // namespace
+}  // namespace planeslam::mapping
