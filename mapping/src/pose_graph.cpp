@@ -1,0 +1,332 @@
+// Pose graph optimisation on Ceres (after Ceres' examples/slam/pose_graph_3d).
+#include "planeslam/mapping/pose_graph.hpp"
+
+#include <ceres/ceres.h>
+
+#include <Eigen/Cholesky>
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <memory>
+
+#include "planeslam/datasets/errors.hpp"
+
+namespace planeslam::mapping {
+
+Pose PoseGraphNode::T_world_node() const {
+  Pose T = Pose::Identity();
+  T.linear() = rotation.normalized().toRotationMatrix();
+  T.translation() = position;
+  return T;
+}
+
+void PoseGraphNode::SetPose(const Pose& T_world_node) {
+  position = T_world_node.translation();
+  rotation = Eigen::Quaterniond(T_world_node.rotation()).normalized();
+}
+
+Pose PoseGraphEdge::T_a_b() const {
+  Pose T = Pose::Identity();
+  T.linear() = rotation.normalized().toRotationMatrix();
+  T.translation() = translation;
+  return T;
+}
+
+void PoseGraphEdge::SetMeasurement(const Pose& T_a_b) {
+  translation = T_a_b.translation();
+  rotation = Eigen::Quaterniond(T_a_b.rotation()).normalized();
+}
+
+void PoseGraph::AddNode(std::int64_t id, const Pose& T_world_node, bool fixed) {
+  PoseGraphNode node;
+  node.id = id;
+  node.SetPose(T_world_node);
+  node.fixed = fixed;
+  AddNode(node);
+}
+
+void PoseGraph::AddNode(const PoseGraphNode& node) {
+  PLANESLAM_CHECK(!HasNode(node.id), "duplicate pose graph node id " << node.id);
+  index_.emplace(node.id, nodes_.size());
+  nodes_.push_back(node);
+}
+
+void PoseGraph::AddEdge(const PoseGraphEdge& edge) {
+  PLANESLAM_CHECK(HasNode(edge.from), "edge from unknown node " << edge.from);
+  PLANESLAM_CHECK(HasNode(edge.to), "edge to unknown node " << edge.to);
+  PLANESLAM_CHECK(edge.information.allFinite() &&
+                      (edge.information - edge.information.transpose()).cwiseAbs().maxCoeff() <=
+                          1e-9 * edge.information.cwiseAbs().maxCoeff(),
+                  "edge " << edge.from << "->" << edge.to << ": information not symmetric");
+  PLANESLAM_CHECK(edge.information.llt().info() == Eigen::Success,
+                  "edge " << edge.from << "->" << edge.to
+                          << ": information not positive definite");
+  edges_.push_back(edge);
+}
+
+void PoseGraph::AddEdge(std::int64_t from, std::int64_t to, const Pose& T_a_b,
+                        const Matrix6d& information, EdgeKind kind) {
+  PoseGraphEdge edge;
+  edge.from = from;
+  edge.to = to;
+  edge.SetMeasurement(T_a_b);
+  edge.information = information;
+  edge.kind = kind;
+  AddEdge(edge);
+}
+
+const PoseGraphNode& PoseGraph::node(std::int64_t id) const {
+  auto it = index_.find(id);
+  PLANESLAM_CHECK(it != index_.end(), "no pose graph node " << id);
+  return nodes_[it->second];
+}
+
+PoseGraphNode& PoseGraph::node(std::int64_t id) {
+  auto it = index_.find(id);
+  PLANESLAM_CHECK(it != index_.end(), "no pose graph node " << id);
+  return nodes_[it->second];
+}
+
+std::size_t PoseGraph::NumLoopClosures() const {
+  return static_cast<std::size_t>(std::count_if(edges_.begin(), edges_.end(), [](const auto& e) {
+    return e.kind == EdgeKind::kLoopClosure;
+  }));
+}
+
+std::vector<std::string> PoseGraphConfig::Validate() const {
+  std::vector<std::string> problems;
+  if (max_iterations < 0) problems.push_back("max_iterations must be >= 0");
+  if (!(function_tolerance >= 0) || !(gradient_tolerance >= 0) || !(parameter_tolerance >= 0)) {
+    problems.push_back("tolerances must be >= 0");
+  }
+  if (loop_closure_loss != "none" && loop_closure_loss != "huber" &&
+      loop_closure_loss != "cauchy") {
+    problems.push_back("loop_closure_loss must be none, huber or cauchy, not '" +
+                       loop_closure_loss + "'");
+  }
+  if (!(loop_closure_loss_scale > 0) || !std::isfinite(loop_closure_loss_scale)) {
+    problems.push_back("loop_closure_loss_scale must be > 0");
+  }
+  if (num_threads < 1) problems.push_back("num_threads must be >= 1");
+  return problems;
+}
+
+Eigen::Matrix<double, 7, 1> ToAmbient(const Pose& T) {
+  Eigen::Matrix<double, 7, 1> x;
+  const Eigen::Quaterniond q(T.rotation());
+  x << T.translation(), q.x(), q.y(), q.z(), q.w();
+  return x;
+}
+
+namespace {
+
+/// Edge residual of the file comment in pose_graph.hpp. Parameters: p_a (3), q_a (4, Eigen's
+/// x y z w memory order), p_b, q_b.
+class RelativePoseError {
+ public:
+  RelativePoseError(const Eigen::Vector3d& p_ab, const Eigen::Quaterniond& q_ab,
+                    const Matrix6d& sqrt_information)
+      : p_ab_(p_ab), q_ab_(q_ab), sqrt_information_(sqrt_information) {}
+
+  template <typename T>
+  bool operator()(const T* p_a_ptr, const T* q_a_ptr, const T* p_b_ptr, const T* q_b_ptr,
+                  T* residuals_ptr) const {
+    Eigen::Map<const Eigen::Matrix<T, 3, 1>> p_a(p_a_ptr);
+    Eigen::Map<const Eigen::Quaternion<T>> q_a(q_a_ptr);
+    Eigen::Map<const Eigen::Matrix<T, 3, 1>> p_b(p_b_ptr);
+    Eigen::Map<const Eigen::Quaternion<T>> q_b(q_b_ptr);
+
+    // Estimated relative pose; conjugate == inverse on the unit quaternions the manifold keeps.
+    const Eigen::Quaternion<T> q_a_inverse = q_a.conjugate();
+    const Eigen::Quaternion<T> q_ab_estimated = q_a_inverse * q_b;
+    const Eigen::Matrix<T, 3, 1> p_ab_estimated = q_a_inverse * (p_b - p_a);
+    const Eigen::Quaternion<T> delta_q = q_ab_.template cast<T>() * q_ab_estimated.conjugate();
+
+    Eigen::Map<Eigen::Matrix<T, 6, 1>> residuals(residuals_ptr);
+    residuals.template head<3>() = p_ab_estimated - p_ab_.template cast<T>();
+    // 2 vec(dq) ~ rotation vector of dq for small errors, so rotation information is per rad^2.
+    residuals.template tail<3>() = T(2.0) * delta_q.vec();
+    residuals.applyOnTheLeft(sqrt_information_.template cast<T>());
+    return true;
+  }
+
+  static ceres::CostFunction* Create(const PoseGraphEdge& edge) {
+    // Upper factor U = L^T so that |U e|^2 = e^T L L^T e = e^T information e.
+    const Matrix6d sqrt_information = edge.information.llt().matrixU();
+    return new ceres::AutoDiffCostFunction<RelativePoseError, 6, 3, 4, 3, 4>(
+        new RelativePoseError(edge.translation, edge.rotation.normalized(), sqrt_information));
+  }
+
+ private:
+  Eigen::Vector3d p_ab_;
+  Eigen::Quaterniond q_ab_;
+  Matrix6d sqrt_information_;
+};
+
+ceres::LossFunction* MakeLoopClosureLoss(const PoseGraphConfig& config) {
+  // Ceres' losses act on s = |r|^2 with scale a: quadratic for s < a^2.
+  if (config.loop_closure_loss == "huber") return new ceres::HuberLoss(config.loop_closure_loss_scale);
+  if (config.loop_closure_loss == "cauchy") {
+    return new ceres::CauchyLoss(config.loop_closure_loss_scale);
+  }
+  return nullptr;
+}
+
+const char* TerminationName(ceres::TerminationType type) {
+  switch (type) {
+    case ceres::CONVERGENCE:
+      return "CONVERGENCE";
+    case ceres::NO_CONVERGENCE:
+      return "NO_CONVERGENCE";
+    case ceres::FAILURE:
+      return "FAILURE";
+    case ceres::USER_SUCCESS:
+      return "USER_SUCCESS";
+    case ceres::USER_FAILURE:
+      return "USER_FAILURE";
+  }
+  return "UNKNOWN";
+}
+
+/// Parameter blocks of the nodes (p, q) plus the problem with one residual block per edge.
+struct BuiltProblem {
+  std::vector<Eigen::Vector3d> positions;
+  std::vector<Eigen::Quaterniond> rotations;
+  std::unique_ptr<ceres::Problem> problem;
+  std::size_t num_fixed = 0;
+};
+
+BuiltProblem BuildProblem(const PoseGraph& graph, const PoseGraphConfig& config) {
+  BuiltProblem built;
+  const auto& nodes = graph.nodes();
+  built.positions.resize(nodes.size());
+  built.rotations.resize(nodes.size());
+  std::unordered_map<std::int64_t, std::size_t> index;
+  for (std::size_t i = 0; i < nodes.size(); ++i) {
+    built.positions[i] = nodes[i].position;
+    built.rotations[i] = nodes[i].rotation.normalized();
+    index.emplace(nodes[i].id, i);
+  }
+
+  ceres::Problem::Options problem_options;
+  // One loss object shared by all loop closures; the problem owns and deletes it once.
+  problem_options.loss_function_ownership = ceres::TAKE_OWNERSHIP;
+  built.problem = std::make_unique<ceres::Problem>(problem_options);
+  ceres::Problem& problem = *built.problem;
+  ceres::LossFunction* loop_loss = MakeLoopClosureLoss(config);
+  bool loss_used = false;
+  for (const auto& edge : graph.edges()) {
+    const std::size_t a = index.at(edge.from);
+    const std::size_t b = index.at(edge.to);
+    ceres::LossFunction* loss = edge.kind == EdgeKind::kLoopClosure ? loop_loss : nullptr;
+    loss_used |= loss != nullptr;
+    problem.AddResidualBlock(RelativePoseError::Create(edge), loss, built.positions[a].data(),
+                             built.rotations[a].coeffs().data(), built.positions[b].data(),
+                             built.rotations[b].coeffs().data());
+  }
+  if (!loss_used) delete loop_loss;
+
+  for (std::size_t i = 0; i < nodes.size(); ++i) {
+    if (!problem.HasParameterBlock(built.positions[i].data())) {
+      // An isolated node: nothing constrains it, leave it out of the problem.
+      continue;
+    }
+    problem.SetManifold(built.rotations[i].coeffs().data(), new ceres::EigenQuaternionManifold);
+  }
+  // Gauge: the FIX nodes, else the first node (as g2o does).
+  std::vector<std::size_t> fixed;
+  for (std::size_t i = 0; i < nodes.size(); ++i) {
+    if (nodes[i].fixed) fixed.push_back(i);
+  }
+  if (fixed.empty() && !nodes.empty()) fixed.push_back(0);
+  for (std::size_t i : fixed) {
+    if (!problem.HasParameterBlock(built.positions[i].data())) continue;
+    problem.SetParameterBlockConstant(built.positions[i].data());
+    problem.SetParameterBlockConstant(built.rotations[i].coeffs().data());
+  }
+  built.num_fixed = fixed.size();
+  return built;
+}
+
+}  // namespace
+
+PoseGraphResult OptimizePoseGraph(PoseGraph& graph, const PoseGraphConfig& config) {
+  const auto problems = config.Validate();
+  PLANESLAM_CHECK(problems.empty(), "invalid PoseGraphConfig: " << problems.front());
+  PoseGraphResult result;
+  result.num_nodes = graph.nodes().size();
+  result.num_edges = graph.edges().size();
+  BuiltProblem built = BuildProblem(graph, config);
+  result.num_fixed = built.num_fixed;
+  if (graph.edges().empty()) {
+    result.converged = true;
+    result.usable = true;
+    result.termination = "CONVERGENCE";
+    result.message = "no edges: nothing to optimise";
+    return result;
+  }
+
+  ceres::Solver::Options options;
+  options.minimizer_type = ceres::TRUST_REGION;
+  options.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+  options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  options.max_num_iterations = config.max_iterations;
+  options.function_tolerance = config.function_tolerance;
+  options.gradient_tolerance = config.gradient_tolerance;
+  options.parameter_tolerance = config.parameter_tolerance;
+  options.num_threads = config.num_threads;
+  // Core libraries print nothing (architecture rule 1).
+  options.logging_type = ceres::SILENT;
+  options.minimizer_progress_to_stdout = false;
+
+  ceres::Solver::Summary summary;
+  ceres::Solve(options, built.problem.get(), &summary);
+
+  result.initial_cost = summary.initial_cost;
+  result.final_cost = summary.final_cost;
+  result.iterations = summary.num_successful_steps + summary.num_unsuccessful_steps;
+  result.converged = summary.termination_type == ceres::CONVERGENCE;
+  result.usable = summary.IsSolutionUsable();
+  result.time_seconds = summary.total_time_in_seconds;
+  result.termination = TerminationName(summary.termination_type);
+  result.message = summary.message;
+
+  if (result.usable) {
+    auto& nodes = graph.nodes();
+    for (std::size_t i = 0; i < nodes.size(); ++i) {
+      nodes[i].position = built.positions[i];
+      nodes[i].rotation = built.rotations[i].normalized();
+    }
+  }
+  return result;
+}
+
+double PoseGraphCost(const PoseGraph& graph, const PoseGraphConfig& config) {
+  const auto problems = config.Validate();
+  PLANESLAM_CHECK(problems.empty(), "invalid PoseGraphConfig: " << problems.front());
+  if (graph.edges().empty()) return 0.0;
+  BuiltProblem built = BuildProblem(graph, config);
+  double cost = 0.0;
+  built.problem->Evaluate(ceres::Problem::EvaluateOptions(), &cost, nullptr, nullptr, nullptr);
+  return cost;
+}
+
+EdgeResidualEvaluation EvaluateEdgeResidual(const PoseGraphEdge& edge,
+                                            const Eigen::Matrix<double, 7, 1>& x_a,
+                                            const Eigen::Matrix<double, 7, 1>& x_b) {
+  std::unique_ptr<ceres::CostFunction> cost(RelativePoseError::Create(edge));
+  const Eigen::Matrix<double, 7, 1> a = x_a;
+  const Eigen::Matrix<double, 7, 1> b = x_b;
+  const double* parameters[4] = {a.data(), a.data() + 3, b.data(), b.data() + 3};
+  // Ceres wants row-major Jacobians, one per parameter block.
+  Eigen::Matrix<double, 6, 3, Eigen::RowMajor> j_pa, j_pb;
+  Eigen::Matrix<double, 6, 4, Eigen::RowMajor> j_qa, j_qb;
+  double* jacobians[4] = {j_pa.data(), j_qa.data(), j_pb.data(), j_qb.data()};
+  EdgeResidualEvaluation out;
+  cost->Evaluate(parameters, out.residual.data(), jacobians);
+  out.d_a << j_pa, j_qa;
+  out.d_b << j_pb, j_qb;
+  return out;
+}
+
+}  // namespace planeslam::mapping
