@@ -49,6 +49,7 @@ SyntheticTrajectoryConfig DefaultTrajectory(SceneKind kind) {
     case SceneKind::kRubble:
       c.center = Eigen::Vector3d(0.0, 0.0, 1.6);
       c.radius = 3.8;
+      c.start_angle_deg = -90.0;
       c.look = "inward";
       c.speed = 1.0;
       c.laps = 1.25;
@@ -83,8 +84,8 @@ Pose TrajectoryBodyPose(const SyntheticTrajectoryConfig& c, double t) {
   PLANESLAM_CHECK(c.kind == "loop", "unknown trajectory kind '" << c.kind << "'");
   PLANESLAM_CHECK(c.radius > 0, "loop radius must be positive");
   const double lap = 2.0 * kPi * c.radius;
-  const double theta = s / c.radius;
-  const double phase = 2 * kPi * s / lap;  // = theta
+  const double phase = 2 * kPi * s / lap;  // angle travelled
+  const double theta = c.start_angle_deg * kDeg + phase;
   double heading = theta;                  // outward
   if (c.look == "inward") {
     heading = theta + kPi;

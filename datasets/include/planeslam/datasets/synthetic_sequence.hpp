@@ -30,6 +30,9 @@ struct SyntheticTrajectoryConfig {
   double length = 10.0;       ///< line: run length when frames = 0 [m]
   Eigen::Vector3d center = Eigen::Vector3d(0, 0, 1.4);  ///< loop centre / line start [m]
   double radius = 0.8;                 ///< loop radius [m]
+  /// Loop: angular position of the start around the centre (0 = +x side) [deg]. The room starts
+  /// facing the corner with the table.
+  double start_angle_deg = 135.0;
   double height_amplitude = 0.15;      ///< sinusoidal height change [m]
   double lateral_amplitude = 0.15;     ///< line: sideways sway [m]
   std::string look = "outward";        ///< loop: "outward", "inward" or "forward" (tangent)
