@@ -2,6 +2,7 @@
 
 #include <png.h>
 
+#include <algorithm>
 #include <csetjmp>
 #include <cstring>
 #include <cstdio>
@@ -50,8 +51,56 @@ void FlushStream(png_structp png) { static_cast<std::ostream*>(png_get_io_ptr(pn
 
 }  // namespace
 
+namespace {
+
+// libpng reports errors by longjmp. To keep that well defined, the frames that call setjmp hold no
+// C++ objects with destructors and modify nothing of the caller's between setjmp and longjmp except
+// through pointers; the caller turns a `false` into an IoError.
+struct PngReadHandles {
+  png_structp png = nullptr;
+  png_infop info = nullptr;
+  ~PngReadHandles() {
+    if (png) png_destroy_read_struct(&png, info ? &info : nullptr, nullptr);
+  }
+};
+
+struct PngHeader {
+  png_uint_32 width = 0;
+  png_uint_32 height = 0;
+  int bit_depth = 0;
+  int color_type = 0;
+};
+
+bool ReadPngHeader(png_structp png, png_infop info, std::FILE* file, PngHeader* header) {
+  if (setjmp(png_jmpbuf(png))) return false;
+  png_init_io(png, file);
+  png_set_sig_bytes(png, 8);
+  png_read_info(png, info);
+  header->width = png_get_image_width(png, info);
+  header->height = png_get_image_height(png, info);
+  header->bit_depth = png_get_bit_depth(png, info);
+  header->color_type = png_get_color_type(png, info);
+  return true;
+}
+
+// Reads all rows (any interlacing) into `rows`, 1 or 2 bytes per pixel in host order.
+bool ReadPngRows(png_structp png, png_infop info, int bit_depth, png_bytepp rows) {
+  if (setjmp(png_jmpbuf(png))) return false;
+  if (bit_depth < 8) png_set_expand_gray_1_2_4_to_8(png);
+  if (bit_depth == 16) png_set_swap(png);  // PNG is big-endian; we want host order (x86: little)
+  png_set_interlace_handling(png);
+  png_read_update_info(png, info);
+  png_read_image(png, rows);
+  png_read_end(png, nullptr);
+  return true;
+}
+
+}  // namespace
+
 Image16 ReadPng16(const std::string& path) {
-  if (!std::filesystem::is_regular_file(path)) throw IoError(path, "no such file");
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) throw IoError(path, "no such file");
+  if (!std::filesystem::is_regular_file(path, ec)) throw IoError(path, "not a regular file");
   std::unique_ptr<std::FILE, FileCloser> file(std::fopen(path.c_str(), "rb"));
   if (!file) throw IoError(path, "cannot open file");
   unsigned char signature[8] = {};
@@ -59,55 +108,46 @@ Image16 ReadPng16(const std::string& path) {
     throw IoError(path, "not a PNG file");
   }
   PngErrorState state;
-  png_structp png =
-      png_create_read_struct(PNG_LIBPNG_VER_STRING, &state, &OnPngError, &OnPngWarning);
-  if (!png) throw IoError(path, "cannot initialise libpng");
-  png_infop info = png_create_info_struct(png);
-  Image16 image;
-  std::vector<png_byte> row;
-  // Everything libpng touches after setjmp must not need destructors on the longjmp path except
-  // what we clean up explicitly below; `image` and `row` are declared before setjmp so
-  // their destructors run normally when we throw.
-  if (setjmp(png_jmpbuf(png))) {
-    png_destroy_read_struct(&png, &info, nullptr);
+  PngReadHandles handles;
+  handles.png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &state, &OnPngError, &OnPngWarning);
+  if (!handles.png) throw IoError(path, "cannot initialise libpng");
+  handles.info = png_create_info_struct(handles.png);
+  if (!handles.info) throw IoError(path, "cannot initialise libpng");
+  const InputLimits& limits = GlobalInputLimits();
+  // Let libpng accept any header size the format allows (its default stops at 10^6 px a side with
+  // a cryptic message); our own limits below refuse it by name before anything is allocated.
+  png_set_user_limits(handles.png, 0x7fffffffU, 0x7fffffffU);
+  PngHeader h;
+  if (!ReadPngHeader(handles.png, handles.info, file.get(), &h)) {
     throw IoError(path, "corrupt or truncated PNG (" + state.message + ")");
   }
-  png_init_io(png, file.get());
-  png_set_sig_bytes(png, 8);
-  png_read_info(png, info);
-  const png_uint_32 width = png_get_image_width(png, info);
-  const png_uint_32 height = png_get_image_height(png, info);
-  const int bit_depth = png_get_bit_depth(png, info);
-  const int color_type = png_get_color_type(png, info);
-  const InputLimits& limits = GlobalInputLimits();
-  if (width == 0 || height == 0 || width > limits.max_side || height > limits.max_side ||
-      static_cast<std::int64_t>(width) * height > limits.max_pixels) {
-    png_destroy_read_struct(&png, &info, nullptr);
-    throw IoError(path, "image size " + std::to_string(width) + "x" + std::to_string(height) +
+  if (h.width == 0 || h.height == 0 || h.width > limits.max_side || h.height > limits.max_side ||
+      static_cast<std::int64_t>(h.width) * h.height > limits.max_pixels) {
+    throw IoError(path, "image size " + std::to_string(h.width) + "x" + std::to_string(h.height) +
                             " is empty or exceeds the input limits");
   }
-  if (color_type != PNG_COLOR_TYPE_GRAY) {
-    png_destroy_read_struct(&png, &info, nullptr);
+  if (h.color_type != PNG_COLOR_TYPE_GRAY) {
     throw IoError(path, "expected a single-channel (grey) PNG, got colour type " +
-                            std::to_string(color_type));
+                            std::to_string(h.color_type));
   }
-  if (bit_depth < 8) png_set_expand_gray_1_2_4_to_8(png);
-  if (bit_depth == 16) png_set_swap(png);  // PNG is big-endian; we want host order (x86: little)
-  png_read_update_info(png, info);
-  const std::size_t row_bytes = png_get_rowbytes(png, info);
-  image = Image16(static_cast<int>(width), static_cast<int>(height));
-  row.resize(row_bytes);
-  for (png_uint_32 r = 0; r < height; ++r) {
-    png_read_row(png, row.data(), nullptr);
-    std::uint16_t* out = image.data.data() + static_cast<std::size_t>(r) * width;
-    if (bit_depth == 16) {
-      std::memcpy(out, row.data(), static_cast<std::size_t>(width) * 2);
-    } else {
-      for (png_uint_32 c = 0; c < width; ++c) out[c] = row[c];
+  Image16 image(static_cast<int>(h.width), static_cast<int>(h.height));
+  std::vector<png_byte> bytes8;  // 8-bit (or less) images are widened after reading
+  std::vector<png_bytep> rows(h.height);
+  for (png_uint_32 r = 0; r < h.height; ++r) {
+    if (h.bit_depth == 16) {
+      rows[r] = reinterpret_cast<png_bytep>(image.data.data() + static_cast<std::size_t>(r) * h.width);
     }
   }
-  png_read_end(png, nullptr);
-  png_destroy_read_struct(&png, &info, nullptr);
+  if (h.bit_depth != 16) {
+    bytes8.resize(static_cast<std::size_t>(h.width) * h.height);
+    for (png_uint_32 r = 0; r < h.height; ++r) {
+      rows[r] = bytes8.data() + static_cast<std::size_t>(r) * h.width;
+    }
+  }
+  if (!ReadPngRows(handles.png, handles.info, h.bit_depth, rows.data())) {
+    throw IoError(path, "corrupt or truncated PNG (" + state.message + ")");
+  }
+  if (h.bit_depth != 16) std::copy(bytes8.begin(), bytes8.end(), image.data.begin());
   return image;
 }
 
