@@ -13,6 +13,7 @@
 #include "planeslam/datasets/atomic_file.hpp"
 #include "planeslam/datasets/errors.hpp"
 #include "planeslam/datasets/input_limits.hpp"
+#include "reader_util.hpp"
 
 namespace planeslam::datasets {
 
@@ -23,11 +24,6 @@ InputLimits& GlobalInputLimits() {
 
 namespace {
 
-struct FileCloser {
-  void operator()(std::FILE* f) const {
-    if (f) std::fclose(f);
-  }
-};
 
 // libpng reports errors through longjmp; we keep the message to rethrow as IoError.
 struct PngErrorState {
@@ -71,9 +67,23 @@ struct PngHeader {
   int color_type = 0;
 };
 
-bool ReadPngHeader(png_structp png, png_infop info, std::FILE* file, PngHeader* header) {
+// In-memory source for libpng.
+struct MemorySource {
+  const unsigned char* data = nullptr;
+  std::size_t size = 0;
+  std::size_t pos = 0;
+};
+
+void ReadFromMemory(png_structp png, png_bytep out, png_size_t length) {
+  auto* src = static_cast<MemorySource*>(png_get_io_ptr(png));
+  if (length > src->size - src->pos) png_error(png, "unexpected end of file");
+  std::memcpy(out, src->data + src->pos, length);
+  src->pos += length;
+}
+
+bool ReadPngHeader(png_structp png, png_infop info, MemorySource* source, PngHeader* header) {
   if (setjmp(png_jmpbuf(png))) return false;
-  png_init_io(png, file);
+  png_set_read_fn(png, source, &ReadFromMemory);
   png_set_sig_bytes(png, 8);
   png_read_info(png, info);
   header->width = png_get_image_width(png, info);
@@ -98,15 +108,18 @@ bool ReadPngRows(png_structp png, png_infop info, int bit_depth, png_bytepp rows
 }  // namespace
 
 Image16 ReadPng16(const std::string& path) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) throw IoError(path, "no such file");
-  if (!std::filesystem::is_regular_file(path, ec)) throw IoError(path, "not a regular file");
-  std::unique_ptr<std::FILE, FileCloser> file(std::fopen(path.c_str(), "rb"));
-  if (!file) throw IoError(path, "cannot open file");
-  unsigned char signature[8] = {};
-  if (std::fread(signature, 1, 8, file.get()) != 8 || png_sig_cmp(signature, 0, 8) != 0) {
+  return DecodePng16(detail::ReadWholeFile(path, detail::MaxInputFileBytes()), path);
+}
+
+Image16 DecodePng16(const std::string& bytes, const std::string& path) {
+  if (bytes.size() < 8 ||
+      png_sig_cmp(reinterpret_cast<png_const_bytep>(bytes.data()), 0, 8) != 0) {
     throw IoError(path, "not a PNG file");
   }
+  MemorySource source;
+  source.data = reinterpret_cast<const unsigned char*>(bytes.data());
+  source.size = bytes.size();
+  source.pos = 8;
   PngErrorState state;
   PngReadHandles handles;
   handles.png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &state, &OnPngError, &OnPngWarning);
@@ -118,7 +131,7 @@ Image16 ReadPng16(const std::string& path) {
   // a cryptic message); our own limits below refuse it by name before anything is allocated.
   png_set_user_limits(handles.png, 0x7fffffffU, 0x7fffffffU);
   PngHeader h;
-  if (!ReadPngHeader(handles.png, handles.info, file.get(), &h)) {
+  if (!ReadPngHeader(handles.png, handles.info, &source, &h)) {
     throw IoError(path, "corrupt or truncated PNG (" + state.message + ")");
   }
   if (h.width == 0 || h.height == 0 || h.width > limits.max_side || h.height > limits.max_side ||

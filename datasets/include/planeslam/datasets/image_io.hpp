@@ -28,6 +28,9 @@ struct ImageRgb8 {
 /// Reads a single-channel PNG (16-bit, or 8-bit widened). Throws IoError on a missing, truncated
 /// or corrupt file, a colour image, or a size above the configured limits.
 Image16 ReadPng16(const std::string& path);
+/// Decodes a PNG held in memory (as ReadPng16; `name` is used in messages). For fuzzing and for
+/// callers that already hold the bytes.
+Image16 DecodePng16(const std::string& bytes, const std::string& name);
 /// Writes a 16-bit grey PNG atomically.
 void WritePng16(const std::string& path, const Image16& image);
 /// Writes an 8-bit RGB PNG atomically.
