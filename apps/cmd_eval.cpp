@@ -1,10 +1,9 @@
 // `planeslam eval ape|rpe REF EST`: trajectory metrics with evo's semantics (default) or the TUM
 // RGB-D benchmark tools' (--tum), printed as `name value` lines, optionally as JSON and SVG plots.
-#include <nlohmann/json.hpp>
-
 #include <cmath>
 #include <cstdio>
 #include <iostream>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -39,10 +38,9 @@ std::string Fixed6(double v) {
 std::string EvoStatsBlock(const ds::ErrorStatistics& s) {
   std::ostringstream os;
   char line[96];
-  const std::pair<const char*, double> rows[] = {{"max", s.max},   {"mean", s.mean},
-                                                 {"median", s.median}, {"min", s.min},
-                                                 {"rmse", s.rmse}, {"sse", s.sse},
-                                                 {"std", s.std}};
+  const std::pair<const char*, double> rows[] = {
+      {"max", s.max},   {"mean", s.mean}, {"median", s.median}, {"min", s.min},
+      {"rmse", s.rmse}, {"sse", s.sse},   {"std", s.std}};
   for (const auto& [name, value] : rows) {
     std::snprintf(line, sizeof(line), "%10s\t%.6f\n", name, value);
     os << line;
@@ -56,9 +54,9 @@ std::string EvoStatsBlock(const ds::ErrorStatistics& s) {
 std::string TumStatsBlock(const std::string& prefix, const ds::ErrorStatistics& s,
                           const std::string& unit) {
   std::ostringstream os;
-  const std::pair<const char*, double> rows[] = {{"rmse", s.rmse}, {"mean", s.mean},
+  const std::pair<const char*, double> rows[] = {{"rmse", s.rmse},     {"mean", s.mean},
                                                  {"median", s.median}, {"std", s.std},
-                                                 {"min", s.min}, {"max", s.max}};
+                                                 {"min", s.min},       {"max", s.max}};
   for (const auto& [name, value] : rows) {
     os << prefix << "." << name << " " << Fixed6(value) << " " << unit << "\n";
   }
@@ -116,7 +114,8 @@ class EvalCommand : public Command {
     sub.add_flag("-a,--align", align_, "SE(3) Umeyama alignment of the estimate (evo -a)");
     sub.add_flag("-s,--correct-scale", correct_scale_,
                  "with --align: Sim(3) alignment; alone: scale correction only (as evo)");
-    sub.add_flag("--align-origin", align_origin_, "move the estimate's first pose onto the reference's");
+    sub.add_flag("--align-origin", align_origin_,
+                 "move the estimate's first pose onto the reference's");
     sub.add_option("--n-to-align", n_to_align_, "align with the first N pairs only (-1 = all)");
     sub.add_option("-r,--pose-relation", relation_,
                    "error measure: trans_part [m], angle_deg, angle_rad, rot_part, full")
@@ -143,7 +142,8 @@ class EvalCommand : public Command {
         "pairs, E = inv(Q_i^-1 Q_j) (P_i^-1 P_j)); --tum follows evaluate_ate.py/evaluate_rpe.py\n"
         "(E = inv(P_j^-1 P_i) (Q_j^-1 Q_i)). KITTI files pair by index unless times are given.\n"
         "\nExamples:\n"
-        "  planeslam eval ape groundtruth.txt estimate.txt -a             APE after SE(3) alignment\n"
+        "  planeslam eval ape groundtruth.txt estimate.txt -a             APE after SE(3) "
+        "alignment\n"
         "  planeslam eval ape groundtruth.txt estimate.txt --tum          as evaluate_ate.py\n"
         "  planeslam eval rpe groundtruth.txt estimate.txt -d 10 -u f -r angle_deg\n"
         "  planeslam eval rpe groundtruth.txt estimate.txt --tum --fixed-delta --delta 1 "
@@ -160,10 +160,10 @@ class EvalCommand : public Command {
       return o;
     }();
     ds::TrajectoryReadReport report;
-    const ds::TrajectoryFormat ref_format =
-        format_.empty() ? ds::DetectTrajectoryFormat(ref_path_) : ds::ParseTrajectoryFormat(format_);
-    const ds::TrajectoryFormat est_format =
-        format_.empty() ? ds::DetectTrajectoryFormat(est_path_) : ds::ParseTrajectoryFormat(format_);
+    const ds::TrajectoryFormat ref_format = format_.empty() ? ds::DetectTrajectoryFormat(ref_path_)
+                                                            : ds::ParseTrajectoryFormat(format_);
+    const ds::TrajectoryFormat est_format = format_.empty() ? ds::DetectTrajectoryFormat(est_path_)
+                                                            : ds::ParseTrajectoryFormat(format_);
     const ds::Trajectory ref =
         ds::ReadTrajectory(ref_path_, ref_format, &report, ref_times_, read_options);
     const ds::Trajectory est =
@@ -240,8 +240,8 @@ class EvalCommand : public Command {
     al["n_to_align"] = options.n_to_align;
     if (a.used_umeyama) {
       const Eigen::Matrix3d& r = a.umeyama.rotation;
-      al["rotation"] = {{r(0, 0), r(0, 1), r(0, 2)}, {r(1, 0), r(1, 1), r(1, 2)},
-                        {r(2, 0), r(2, 1), r(2, 2)}};
+      al["rotation"] = {
+          {r(0, 0), r(0, 1), r(0, 2)}, {r(1, 0), r(1, 1), r(1, 2)}, {r(2, 0), r(2, 1), r(2, 2)}};
       al["translation"] = {a.umeyama.translation.x(), a.umeyama.translation.y(),
                            a.umeyama.translation.z()};
       al["scale"] = a.umeyama.scale;
@@ -266,8 +266,8 @@ class EvalCommand : public Command {
     if (!r.ok) return Fail(est_path_ + ": " + r.message);
 
     const std::string unit = ds::UnitOf(relation);
-    const std::string title = "APE w.r.t. " + ds::Description(relation) + " (" + unit + ")\n" +
-                              AlignmentTitle(alignment);
+    const std::string title =
+        "APE w.r.t. " + ds::Description(relation) + " (" + unit + ")\n" + AlignmentTitle(alignment);
     if (tum_) {
       std::cout << "compared_pose_pairs " << r.stats.count << " pairs\n";
       const std::string name = relation == ds::PoseRelation::kTranslation
@@ -355,15 +355,15 @@ class EvalCommand : public Command {
       std::vector<Pose> ends;
       for (const ds::IndexPair& p : r.est_pairs) ends.push_back(r.est_poses[p.second]);
       PlotTrajectories(plot_dir_ + "/rpe_trajectories.svg",
-                       "RPE: trajectories (top view), error at the pairs' second pose",
-                       r.ref_poses, r.est_poses, ends, r.errors, label);
-      PlotErrorOverTime(plot_dir_ + "/rpe_error.svg", "RPE over time", r.stamps, r.errors,
-                        r.stats, label);
+                       "RPE: trajectories (top view), error at the pairs' second pose", r.ref_poses,
+                       r.est_poses, ends, r.errors, label);
+      PlotErrorOverTime(plot_dir_ + "/rpe_error.svg", "RPE over time", r.stamps, r.errors, r.stats,
+                        label);
       std::vector<double> index(r.errors.size());
       for (std::size_t i = 0; i < index.size(); ++i) index[i] = static_cast<double>(i);
-      SvgPlot per_pair("RPE per pair (delta = " + delta_text + " " +
-                           ds::ToString(options.delta_unit) + ")",
-                       "pair index", label);
+      SvgPlot per_pair(
+          "RPE per pair (delta = " + delta_text + " " + ds::ToString(options.delta_unit) + ")",
+          "pair index", label);
       LineStyle thin;
       thin.width = 0.8;
       thin.color = SvgColor{170, 170, 170};
@@ -402,8 +402,9 @@ class EvalCommand : public Command {
   }
 
   static void PlotErrorOverTime(const std::string& path, const std::string& title,
-                                const std::vector<double>& stamps, const std::vector<double>& errors,
-                                const ds::ErrorStatistics& stats, const std::string& label) {
+                                const std::vector<double>& stamps,
+                                const std::vector<double>& errors, const ds::ErrorStatistics& stats,
+                                const std::string& label) {
     SvgPlot plot(title, "t - t0 [s]", label);
     std::vector<double> t(stamps.size());
     for (std::size_t i = 0; i < stamps.size(); ++i) t[i] = stamps[i] - stamps.front();

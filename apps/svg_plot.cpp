@@ -78,15 +78,16 @@ std::string SvgColor::Hex() const {
 SvgColor ColorMap(double t) {
   // Viridis sampled at nine points (matplotlib's table), linearly interpolated.
   static const std::uint8_t kTable[9][3] = {{68, 1, 84},    {72, 40, 120},  {62, 73, 137},
-                                           {49, 104, 142}, {38, 130, 142}, {31, 158, 137},
-                                           {53, 183, 121}, {110, 206, 88}, {253, 231, 37}};
+                                            {49, 104, 142}, {38, 130, 142}, {31, 158, 137},
+                                            {53, 183, 121}, {110, 206, 88}, {253, 231, 37}};
   if (!std::isfinite(t)) t = 0.0;
   t = std::clamp(t, 0.0, 1.0) * 8.0;
   const int i = std::min(7, static_cast<int>(t));
   const double f = t - i;
   SvgColor c;
   auto mix = [&](int k) {
-    return static_cast<std::uint8_t>(std::lround(kTable[i][k] + f * (kTable[i + 1][k] - kTable[i][k])));
+    return static_cast<std::uint8_t>(
+        std::lround(kTable[i][k] + f * (kTable[i + 1][k] - kTable[i][k])));
   };
   c.r = mix(0);
   c.g = mix(1);
@@ -95,10 +96,9 @@ SvgColor ColorMap(double t) {
 }
 
 SvgColor CycleColor(int i) {
-  static const std::uint8_t kTab10[10][3] = {{31, 119, 180}, {255, 127, 14}, {44, 160, 44},
-                                            {214, 39, 40},  {148, 103, 189}, {140, 86, 75},
-                                            {227, 119, 194}, {127, 127, 127}, {188, 189, 34},
-                                            {23, 190, 207}};
+  static const std::uint8_t kTab10[10][3] = {
+      {31, 119, 180}, {255, 127, 14},  {44, 160, 44},   {214, 39, 40},  {148, 103, 189},
+      {140, 86, 75},  {227, 119, 194}, {127, 127, 127}, {188, 189, 34}, {23, 190, 207}};
   const int k = ((i % 10) + 10) % 10;
   return SvgColor{kTab10[k][0], kTab10[k][1], kTab10[k][2]};
 }
@@ -106,9 +106,9 @@ SvgColor CycleColor(int i) {
 BoxStats ComputeBoxStats(const std::string& label, std::vector<double> values) {
   BoxStats box;
   box.label = label;
-  values.erase(std::remove_if(values.begin(), values.end(),
-                              [](double v) { return !std::isfinite(v); }),
-               values.end());
+  values.erase(
+      std::remove_if(values.begin(), values.end(), [](double v) { return !std::isfinite(v); }),
+      values.end());
   if (values.empty()) return box;
   std::sort(values.begin(), values.end());
   auto percentile = [&](double p) {  // numpy.percentile, method "linear"
@@ -165,8 +165,8 @@ void SvgPlot::AddLine(const std::vector<double>& x, const std::vector<double>& y
   series_.push_back(std::move(s));
 }
 
-void SvgPlot::AddScatter(const std::vector<double>& x, const std::vector<double>& y,
-                         SvgColor color, const std::string& legend, double radius) {
+void SvgPlot::AddScatter(const std::vector<double>& x, const std::vector<double>& y, SvgColor color,
+                         const std::string& legend, double radius) {
   LineStyle style;
   style.color = color;
   series_.push_back({Series::Kind::kScatter, x, y, {}, style, radius, legend});
@@ -372,7 +372,8 @@ std::string SvgPlot::Render() const {
     const double w = 40 + 6.5 * static_cast<double>(longest), h = 8 + 18.0 * entries.size();
     const double x0 = left + pw - w - 8, y0 = top + 8;
     o << "<g>\n<rect x=\"" << Num(x0) << "\" y=\"" << Num(y0) << "\" width=\"" << Num(w)
-      << "\" height=\"" << Num(h) << "\" fill=\"white\" fill-opacity=\"0.85\" stroke=\"#999999\"/>\n";
+      << "\" height=\"" << Num(h)
+      << "\" fill=\"white\" fill-opacity=\"0.85\" stroke=\"#999999\"/>\n";
     for (std::size_t k = 0; k < entries.size(); ++k) {
       const Series& s = *entries[k];
       const double y = y0 + 15 + 18.0 * k;
@@ -380,8 +381,8 @@ std::string SvgPlot::Render() const {
         o << "<circle cx=\"" << Num(x0 + 17) << "\" cy=\"" << Num(y - 4) << "\" r=\"3.5\" fill=\""
           << s.style.color.Hex() << "\"/>\n";
       } else {
-        o << "<line x1=\"" << Num(x0 + 6) << "\" y1=\"" << Num(y - 4) << "\" x2=\""
-          << Num(x0 + 28) << "\" y2=\"" << Num(y - 4) << "\" stroke=\"" << s.style.color.Hex()
+        o << "<line x1=\"" << Num(x0 + 6) << "\" y1=\"" << Num(y - 4) << "\" x2=\"" << Num(x0 + 28)
+          << "\" y2=\"" << Num(y - 4) << "\" stroke=\"" << s.style.color.Hex()
           << "\" stroke-width=\"" << Num(s.style.width) << "\""
           << (s.style.dashed ? " stroke-dasharray=\"6,4\"" : "") << "/>\n";
       }
@@ -412,8 +413,6 @@ std::string SvgPlot::Render() const {
   return o.str();
 }
 
-void SvgPlot::Write(const std::string& path) const {
-  datasets::WriteFileAtomic(path, Render());
-}
+void SvgPlot::Write(const std::string& path) const { datasets::WriteFileAtomic(path, Render()); }
 
 }  // namespace planeslam::app

@@ -1,7 +1,6 @@
 #include "planeslam/datasets/trajectory_eval.hpp"
 
 #include <Eigen/SVD>
-
 #include <algorithm>
 #include <cmath>
 #include <numeric>
@@ -49,7 +48,8 @@ std::string FormatNumber(double value) {
 
 Eigen::Matrix3Xd Positions(const std::vector<Pose>& poses, std::size_t count) {
   Eigen::Matrix3Xd m(3, static_cast<Eigen::Index>(count));
-  for (std::size_t i = 0; i < count; ++i) m.col(static_cast<Eigen::Index>(i)) = poses[i].translation();
+  for (std::size_t i = 0; i < count; ++i)
+    m.col(static_cast<Eigen::Index>(i)) = poses[i].translation();
   return m;
 }
 
@@ -191,8 +191,8 @@ UmeyamaResult UmeyamaAlignment(const Eigen::Matrix3Xd& source, const Eigen::Matr
   const Eigen::Vector3d mean_y = target.rowwise().sum() * inv_n;  // eq. 35
   const Eigen::Matrix3Xd xc = source.colwise() - mean_x;
   const Eigen::Matrix3Xd yc = target.colwise() - mean_y;
-  const double sigma_x = xc.squaredNorm() * inv_n;                // eq. 36
-  const Eigen::Matrix3d cov = yc * xc.transpose() * inv_n;        // eq. 38
+  const double sigma_x = xc.squaredNorm() * inv_n;          // eq. 36
+  const Eigen::Matrix3d cov = yc * xc.transpose() * inv_n;  // eq. 38
   Eigen::JacobiSVD<Eigen::Matrix3d> svd(cov, Eigen::ComputeFullU | Eigen::ComputeFullV);
   const Eigen::Vector3d d = svd.singularValues();
   result.singular_values = d;
@@ -207,9 +207,8 @@ UmeyamaResult UmeyamaAlignment(const Eigen::Matrix3Xd& source, const Eigen::Matr
   }
   Eigen::Matrix3d s = Eigen::Matrix3d::Identity();  // eq. 43: keep a proper rotation
   if (svd.matrixU().determinant() * svd.matrixV().determinant() < 0.0) s(2, 2) = -1.0;
-  result.transform.rotation = svd.matrixU() * s * svd.matrixV().transpose();  // eq. 40
-  result.transform.scale =
-      with_scale ? (d.asDiagonal() * s).trace() / sigma_x : 1.0;  // eq. 42
+  result.transform.rotation = svd.matrixU() * s * svd.matrixV().transpose();           // eq. 40
+  result.transform.scale = with_scale ? (d.asDiagonal() * s).trace() / sigma_x : 1.0;  // eq. 42
   result.transform.translation =
       mean_y - result.transform.scale * result.transform.rotation * mean_x;  // eq. 41
   return result;
@@ -274,9 +273,9 @@ std::string ToString(PoseRelation relation) {
 }
 
 PoseRelation ParsePoseRelation(const std::string& name) {
-  for (PoseRelation r : {PoseRelation::kTranslation, PoseRelation::kRotationAngleDeg,
-                         PoseRelation::kRotationAngleRad, PoseRelation::kRotationPart,
-                         PoseRelation::kFull}) {
+  for (PoseRelation r :
+       {PoseRelation::kTranslation, PoseRelation::kRotationAngleDeg,
+        PoseRelation::kRotationAngleRad, PoseRelation::kRotationPart, PoseRelation::kFull}) {
     if (ToString(r) == name) return r;
   }
   throw ConfigError("unknown pose relation '" + name +
@@ -604,7 +603,8 @@ RpeResult EvaluateRpeTum(const Trajectory& ref, const Trajectory& est, const Rpe
   {
     std::vector<std::size_t> returned;
     for (double t : est.stamps) {
-      const double t_gt = ref.stamps[TumFindClosestIndex(ref.stamps, t + options.association.offset)];
+      const double t_gt =
+          ref.stamps[TumFindClosestIndex(ref.stamps, t + options.association.offset)];
       returned.push_back(TumFindClosestIndex(est.stamps, t_gt - options.association.offset));
     }
     std::sort(returned.begin(), returned.end());
@@ -618,7 +618,8 @@ RpeResult EvaluateRpeTum(const Trajectory& ref, const Trajectory& est, const Rpe
   // Alignment has no effect on this RPE unless it scales; it is applied for plots and -s.
   if (options.alignment.align || options.alignment.correct_scale ||
       options.alignment.align_origin) {
-    const std::vector<IndexPair> assoc = AssociateTum(ref.stamps, est.stamps, 0.02, options.association.offset);
+    const std::vector<IndexPair> assoc =
+        AssociateTum(ref.stamps, est.stamps, 0.02, options.association.offset);
     std::vector<Pose> r, e;
     for (const IndexPair& p : assoc) {
       r.push_back(ref.poses[p.first]);

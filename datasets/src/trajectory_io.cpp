@@ -1,7 +1,6 @@
 #include "planeslam/datasets/trajectory_io.hpp"
 
 #include <Eigen/SVD>
-
 #include <charconv>
 #include <cmath>
 #include <cstdlib>
@@ -51,8 +50,8 @@ std::vector<std::string> SplitCommas(const std::string& text) {
   std::size_t start = 0;
   while (true) {
     const std::size_t comma = text.find(',', start);
-    std::string token = text.substr(start, comma == std::string::npos ? std::string::npos
-                                                                       : comma - start);
+    std::string token =
+        text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
     const std::size_t a = token.find_first_not_of(" \t");
     const std::size_t b = token.find_last_not_of(" \t");
     tokens.push_back(a == std::string::npos ? std::string() : token.substr(a, b - a + 1));
@@ -87,9 +86,8 @@ std::string ColumnCountMessage(std::size_t got, const std::string& expected) {
 /// same; the TUM tools silently keep the last of duplicate stamps). Returns false when the line
 /// must be skipped (a duplicate kept as the first); a duplicate kept as the last replaces the
 /// previous pose, which the caller does when this returns true and the stamp equals the last.
-bool CheckStampOrder(const std::string& path, long line, const Trajectory& trajectory,
-                     double stamp, const TrajectoryReadOptions& options,
-                     std::vector<long>* duplicate_lines) {
+bool CheckStampOrder(const std::string& path, long line, const Trajectory& trajectory, double stamp,
+                     const TrajectoryReadOptions& options, std::vector<long>* duplicate_lines) {
   if (trajectory.empty()) return true;
   const double previous = trajectory.stamps.back();
   if (stamp == previous) {
@@ -137,8 +135,7 @@ Eigen::Quaterniond CheckedQuaternion(const std::string& path, long line, double 
   const double deviation = std::abs(q.norm() - 1.0);
   if (!(deviation <= options.max_tolerance)) {
     std::ostringstream os;
-    os << "quaternion norm " << q.norm() << " is not 1 (tolerance " << options.max_tolerance
-       << ")";
+    os << "quaternion norm " << q.norm() << " is not 1 (tolerance " << options.max_tolerance << ")";
     throw IoError(path, line, os.str());
   }
   if (deviation > options.silent_tolerance) ++*warned;
@@ -229,8 +226,7 @@ Trajectory ReadTumTrajectory(const std::string& path, TrajectoryReadReport* repo
 }
 
 Trajectory ReadKittiTrajectory(const std::string& path, const std::string& times_path,
-                               TrajectoryReadReport* report,
-                               const TrajectoryReadOptions& options) {
+                               TrajectoryReadReport* report, const TrajectoryReadOptions& options) {
   std::vector<double> times;
   std::vector<long> time_lines;
   if (!times_path.empty()) {
@@ -271,8 +267,8 @@ Trajectory ReadKittiTrajectory(const std::string& path, const std::string& times
     const double deviation = (r.transpose() * r - Eigen::Matrix3d::Identity()).norm();
     if (!(deviation <= options.max_tolerance) || r.determinant() < 0.0) {
       std::ostringstream os;
-      os << "rotation is not orthonormal (|RtR - I| = " << deviation << ", det "
-         << r.determinant() << ")";
+      os << "rotation is not orthonormal (|RtR - I| = " << deviation << ", det " << r.determinant()
+         << ")";
       throw IoError(path, line.number, os.str());
     }
     if (deviation > options.silent_tolerance) {
@@ -284,8 +280,8 @@ Trajectory ReadKittiTrajectory(const std::string& path, const std::string& times
     double stamp = static_cast<double>(index);
     if (!times_path.empty()) {
       if (index >= times.size()) {
-        throw IoError(times_path, "has " + std::to_string(times.size()) +
-                                      " stamps but " + path + " has more poses");
+        throw IoError(times_path, "has " + std::to_string(times.size()) + " stamps but " + path +
+                                      " has more poses");
       }
       stamp = times[index];
     }

@@ -1,8 +1,7 @@
 // `planeslam eval` end to end: the TUM tools' published numbers through the command line, evo's
-// output layout on a hand-computed case, JSON and SVG outputs, and one-line errors with exit code 2.
+// output layout on a hand-computed case, JSON and SVG outputs, and one-line errors with exit
+// code 2.
 #include <gtest/gtest.h>
-#include <nlohmann/json.hpp>
-
 #include <sys/wait.h>
 
 #include <algorithm>
@@ -10,6 +9,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 
@@ -33,8 +33,8 @@ std::string Slurp(const std::filesystem::path& path) {
 
 CliResult RunEval(const std::string& args, const std::filesystem::path& dir) {
   const std::filesystem::path out = dir / "stdout.txt", err = dir / "stderr.txt";
-  const std::string command = std::string(PLANESLAM_BIN) + " eval " + args + " >" + out.string() +
-                              " 2>" + err.string();
+  const std::string command =
+      std::string(PLANESLAM_BIN) + " eval " + args + " >" + out.string() + " 2>" + err.string();
   const int status = std::system(command.c_str());
   CliResult r;
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
@@ -62,8 +62,8 @@ TEST(EvalCli, TumAteReferenceValues) {
   PLANESLAM_REQUIRE_DATA();
   const auto dir = test::ScratchDir();
   CliResult r = RunEval("ape " + Data("freiburg1_xyz-groundtruth.txt") + " " +
-                  Data("freiburg1_xyz-rgbdslam.txt") + " --tum",
-              dir);
+                            Data("freiburg1_xyz-rgbdslam.txt") + " --tum",
+                        dir);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(r.out,
             "compared_pose_pairs 786 pairs\n"
@@ -140,10 +140,9 @@ TEST(EvalCli, EvoLayoutOnAHandComputedCase) {
   // A 0.004 s stamp offset is outside --t-max-diff 0.001: nothing associates.
   r = RunEval("ape " + r_path + " " + e_path + " --t-max-diff 0.001", dir);
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_EQ(r.err.rfind("planeslam: error: " + e_path + ": no timestamps within 0.001 s of " +
-                            r_path,
-                        0),
-            0u)
+  EXPECT_EQ(
+      r.err.rfind("planeslam: error: " + e_path + ": no timestamps within 0.001 s of " + r_path, 0),
+      0u)
       << r.err;
   EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1);
   // ... and --t-offset brings it back.
@@ -153,8 +152,9 @@ TEST(EvalCli, EvoLayoutOnAHandComputedCase) {
   // RPE with delta 1 frame: relative motions agree exactly.
   r = RunEval("rpe " + r_path + " " + e_path + " -r angle_deg", dir);
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_TRUE(Contains(r.out, "RPE w.r.t. rotation angle in degrees (deg)\nfor delta = 1 (frames) "
-                              "using consecutive pairs\n(not aligned)\n"))
+  EXPECT_TRUE(Contains(r.out,
+                       "RPE w.r.t. rotation angle in degrees (deg)\nfor delta = 1 (frames) "
+                       "using consecutive pairs\n(not aligned)\n"))
       << r.out;
   EXPECT_TRUE(Contains(r.out, "     pairs\t9\n")) << r.out;
 }

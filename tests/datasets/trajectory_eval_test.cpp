@@ -1,6 +1,8 @@
 // Trajectory evaluation against hand-computed cases (evo's and the TUM tools' rules, worked out
 // from their source), closed-form alignment, invariants, and the TUM tools' published numbers on
 // the shared data.
+#include "planeslam/datasets/trajectory_eval.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -9,7 +11,6 @@
 #include <string>
 
 #include "planeslam/datasets/errors.hpp"
-#include "planeslam/datasets/trajectory_eval.hpp"
 #include "planeslam/datasets/trajectory_io.hpp"
 #include "test_support.hpp"
 
@@ -64,8 +65,7 @@ TEST(Association, EvoNearestFromTheShorterTrajectory) {
 
 TEST(Association, TumClosestFirstOneToOne) {
   // associate.py: 1.001 is closer to 1.0 than 0.998, so it wins; 0.998 has nothing else < 0.02 s.
-  EXPECT_EQ(AssociateTum({0.0, 1.0, 2.0}, {0.998, 1.001}, 0.02),
-            (std::vector<IndexPair>{{1, 1}}));
+  EXPECT_EQ(AssociateTum({0.0, 1.0, 2.0}, {0.998, 1.001}, 0.02), (std::vector<IndexPair>{{1, 1}}));
   // Strict: a difference of exactly max_diff is not a match (0.5 exact in binary).
   EXPECT_TRUE(AssociateTum({1.0}, {1.5}, 0.5).empty());
   // Greedy by difference: est 0.51 would prefer ref 0.5 but ref 0.5 goes to est 0.505 first.
@@ -84,8 +84,7 @@ TEST(Association, NoOverlapIsAnIoErrorNamingTheEstimate) {
     FAIL() << "no exception";
   } catch (const IoError& e) {
     EXPECT_EQ(e.file(), "est.txt");
-    EXPECT_EQ(std::string(e.what()).rfind("est.txt: no timestamps within 0.01 s of gt.txt", 0),
-              0u)
+    EXPECT_EQ(std::string(e.what()).rfind("est.txt: no timestamps within 0.01 s of gt.txt", 0), 0u)
         << e.what();
   }
   AssociationOptions by_index;
@@ -114,7 +113,8 @@ TEST(Umeyama, RecoversAKnownSim3AndSe3) {
 
 TEST(Umeyama, DegenerateInputsAreFlagged) {
   Eigen::Matrix3Xd line(3, 10);
-  for (int i = 0; i < 10; ++i) line.col(i) = Eigen::Vector3d(1, 2, 3) * i + Eigen::Vector3d(5, 0, 0);
+  for (int i = 0; i < 10; ++i)
+    line.col(i) = Eigen::Vector3d(1, 2, 3) * i + Eigen::Vector3d(5, 0, 0);
   const UmeyamaResult collinear = UmeyamaAlignment(line, line, false);
   EXPECT_TRUE(collinear.degenerate);
   EXPECT_NE(collinear.reason.find("collinear"), std::string::npos);
@@ -190,7 +190,7 @@ TEST(Statistics, HandComputed) {
   EXPECT_DOUBLE_EQ(s.sse, 30.0);
   EXPECT_DOUBLE_EQ(s.rmse, std::sqrt(7.5));
   EXPECT_DOUBLE_EQ(s.mean, 2.5);
-  EXPECT_DOUBLE_EQ(s.median, 2.5);  // numpy: mean of the middle two
+  EXPECT_DOUBLE_EQ(s.median, 2.5);           // numpy: mean of the middle two
   EXPECT_DOUBLE_EQ(s.std, std::sqrt(1.25));  // population, ddof 0
   EXPECT_EQ(s.min, 1.0);
   EXPECT_EQ(s.max, 4.0);
@@ -212,9 +212,9 @@ TEST(Ape, PoseRelationsHandComputed) {
   // The angle is accurate near 0 and pi, where acos is not.
   EXPECT_NEAR(RotationAngle(Eigen::AngleAxisd(1e-9, Eigen::Vector3d::UnitX()).toRotationMatrix()),
               1e-9, 1e-20);
-  EXPECT_NEAR(RotationAngle(Eigen::AngleAxisd(kPi - 1e-9, Eigen::Vector3d::UnitY())
-                                .toRotationMatrix()),
-              kPi - 1e-9, 1e-15);
+  EXPECT_NEAR(
+      RotationAngle(Eigen::AngleAxisd(kPi - 1e-9, Eigen::Vector3d::UnitY()).toRotationMatrix()),
+      kPi - 1e-9, 1e-15);
 }
 
 TEST(Rpe, EvoPairSelectionHandComputed) {
@@ -226,8 +226,7 @@ TEST(Rpe, EvoPairSelectionHandComputed) {
                         0.1, /*all_pairs=*/true),
             (std::vector<IndexPair>{{0, 2}, {1, 3}, {2, 4}, {3, 5}, {4, 6}}));
   // Path: 0.4 m steps, delta 1 m; evo's first pair starts where 1 m was first reached (index 3).
-  EXPECT_EQ(EvoRpePairs(poses, 1.0, DeltaUnit::kMeters),
-            (std::vector<IndexPair>{{3, 6}, {6, 9}}));
+  EXPECT_EQ(EvoRpePairs(poses, 1.0, DeltaUnit::kMeters), (std::vector<IndexPair>{{3, 6}, {6, 9}}));
   // All pairs by path: nearest accumulated distance to 1.2 m within 10 %: j = i + 3.
   const std::vector<IndexPair> all = EvoRpePairs(poses, 1.2, DeltaUnit::kMeters, 0.1, true);
   ASSERT_EQ(all.size(), 7u);
@@ -235,7 +234,8 @@ TEST(Rpe, EvoPairSelectionHandComputed) {
   EXPECT_EQ(all.back(), IndexPair(6, 9));
   // Angles: 6 degrees a step, delta 10 degrees: pairs every 2 steps starting at 0.
   std::vector<Pose> turning;
-  for (int i = 0; i < 7; ++i) turning.push_back(MakePose(Eigen::Vector3d::Zero(), i * 6.0 * kPi / 180));
+  for (int i = 0; i < 7; ++i)
+    turning.push_back(MakePose(Eigen::Vector3d::Zero(), i * 6.0 * kPi / 180));
   EXPECT_EQ(EvoRpePairs(turning, 10.0, DeltaUnit::kDegrees),
             (std::vector<IndexPair>{{0, 2}, {2, 4}, {4, 6}}));
   EXPECT_EQ(EvoRpePairs(turning, 12.0 * kPi / 180, DeltaUnit::kRadians, 0.1, true).size(), 5u);

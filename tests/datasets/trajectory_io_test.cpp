@@ -1,7 +1,8 @@
 // Trajectory readers and writers: round trips, format detection, and one-line errors naming the
 // file and line for the inputs users get wrong.
-#include <gtest/gtest.h>
+#include "planeslam/datasets/trajectory_io.hpp"
 
+#include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -10,7 +11,6 @@
 #include <string>
 
 #include "planeslam/datasets/errors.hpp"
-#include "planeslam/datasets/trajectory_io.hpp"
 #include "test_support.hpp"
 
 namespace planeslam::datasets {
@@ -107,8 +107,9 @@ TEST(TrajectoryIo, DetectsTumAndRefusesUnknownLayouts) {
   EXPECT_EQ(DetectTrajectoryFormat(tum), TrajectoryFormat::kTum);
   const std::string odd = WriteText(dir, "b.txt", "# c\n1 2 3 4 5\n");
   EXPECT_EQ(ErrorOf([&] { DetectTrajectoryFormat(odd); }),
-            odd + ":2: cannot detect the format: 5 columns (TUM has 8, KITTI 12, EuRoC is "
-                  "comma-separated); use --format");
+            odd +
+                ":2: cannot detect the format: 5 columns (TUM has 8, KITTI 12, EuRoC is "
+                "comma-separated); use --format");
 }
 
 TEST(TrajectoryIo, SevenColumnsNamesFileAndLine) {
@@ -132,8 +133,9 @@ TEST(TrajectoryIo, UnsortedAndDuplicateStamps) {
   const auto dir = test::ScratchDir();
   const std::string unsorted =
       WriteText(dir, "u.txt", "1.5 0 0 0 0 0 0 1\n2.5 0 0 0 0 0 0 1\n2.25 0 0 0 0 0 0 1\n");
-  EXPECT_EQ(ErrorOf([&] { ReadTumTrajectory(unsorted); }),
-            unsorted + ":3: timestamp 2.25 is before the previous one (2.5): stamps must be sorted");
+  EXPECT_EQ(
+      ErrorOf([&] { ReadTumTrajectory(unsorted); }),
+      unsorted + ":3: timestamp 2.25 is before the previous one (2.5): stamps must be sorted");
   const std::string dup =
       WriteText(dir, "d.txt", "1.5 0 0 0 0 0 0 1\n2.5 1 0 0 0 0 0 1\n2.5 2 0 0 0 0 0 1\n");
   EXPECT_EQ(ErrorOf([&] { ReadTumTrajectory(dup); }),
@@ -159,8 +161,9 @@ TEST(TrajectoryIo, QuaternionNormsRoundingWarningRefusal) {
   TrajectoryReadReport report;
   const Trajectory t = ReadTumTrajectory(rounded, &report);
   EXPECT_TRUE(report.warnings.empty());
-  EXPECT_NEAR((t.poses[0].linear().transpose() * t.poses[0].linear() -
-               Eigen::Matrix3d::Identity()).norm(), 0.0, 1e-14);
+  EXPECT_NEAR(
+      (t.poses[0].linear().transpose() * t.poses[0].linear() - Eigen::Matrix3d::Identity()).norm(),
+      0.0, 1e-14);
   // Norm 1.01: normalised, with a warning.
   const std::string off = WriteText(dir, "o.txt", "1 0 0 0 0 0 0 1.01\n");
   const Trajectory o = ReadTumTrajectory(off, &report);
@@ -181,7 +184,8 @@ TEST(TrajectoryIo, KittiErrors) {
   const std::string scaled = WriteText(dir, "s.txt", "2 0 0 0 0 2 0 0 0 0 2 0\n");
   EXPECT_NE(ErrorOf([&] { ReadKittiTrajectory(scaled); }).find(scaled + ":1: rotation is not"),
             std::string::npos);
-  const std::string ok = WriteText(dir, "ok.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 1 0 1 0 0 0 0 1 0\n");
+  const std::string ok =
+      WriteText(dir, "ok.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 1 0 1 0 0 0 0 1 0\n");
   const std::string times = WriteText(dir, "times.txt", "0.0\n");
   EXPECT_NE(ErrorOf([&] { ReadKittiTrajectory(ok, times); }).find(times), std::string::npos);
 }
@@ -205,8 +209,9 @@ TEST(TrajectoryIo, ReadsTheSharedTumFiles) {
   EXPECT_EQ(est.poses.front().translation(), Eigen::Vector3d(1.344379, 0.627206, 1.661754));
   // fr2/desk's ground truth repeats one stamp (line 10863): an error unless a policy is chosen.
   EXPECT_EQ(ErrorOf([&] { ReadTumTrajectory(dir + "/fr2_desk_groundtruth.txt"); }),
-            dir + "/fr2_desk_groundtruth.txt:10863: duplicate timestamp 1311868229.576 (stamps "
-                  "must be unique)");
+            dir +
+                "/fr2_desk_groundtruth.txt:10863: duplicate timestamp 1311868229.576 (stamps "
+                "must be unique)");
 }
 
 }  // namespace

@@ -10,7 +10,6 @@
 ///    E = inv(P_j⁻¹ P_i) (Q_j⁻¹ Q_i) (P estimate, Q ground truth).
 /// Q / ref is the reference (ground truth), P / est the estimate. Pure computation, no printing.
 #include <Eigen/Core>
-
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -39,8 +38,8 @@ std::vector<IndexPair> AssociateNearest(const std::vector<double>& ref_stamps,
 /// taken closest first (ties by reference then estimate stamp), each stamp used once; sorted by
 /// reference stamp.
 std::vector<IndexPair> AssociateTum(const std::vector<double>& ref_stamps,
-                                    const std::vector<double>& est_stamps,
-                                    double max_diff = 0.02, double offset = 0.0);
+                                    const std::vector<double>& est_stamps, double max_diff = 0.02,
+                                    double offset = 0.0);
 
 /// Pairs (i, i) for i < min(n_ref, n_est): KITTI files have no stamps.
 std::vector<IndexPair> AssociateByIndex(std::size_t n_ref, std::size_t n_est);
@@ -93,7 +92,7 @@ struct AlignmentResult {
   bool degenerate = false;
   std::string reason;
   bool used_umeyama = false;
-  Sim3Transform umeyama;          ///< as applied (rotation/translation identity in scale-only)
+  Sim3Transform umeyama;  ///< as applied (rotation/translation identity in scale-only)
   bool used_origin = false;
   Pose origin = Pose::Identity();  ///< T applied on the left by --align-origin
 };
@@ -177,12 +176,12 @@ struct ApeOptions {
 };
 
 struct ApeResult {
-  bool ok = false;     ///< false: alignment degenerate (see message)
+  bool ok = false;  ///< false: alignment degenerate (see message)
   std::string message;
-  std::vector<IndexPair> pairs;   ///< into the input trajectories
-  std::vector<double> stamps;     ///< estimate stamps of the pairs [s]
-  std::vector<Pose> ref_poses;    ///< associated reference poses
-  std::vector<Pose> est_poses;    ///< associated estimate poses after alignment
+  std::vector<IndexPair> pairs;  ///< into the input trajectories
+  std::vector<double> stamps;    ///< estimate stamps of the pairs [s]
+  std::vector<Pose> ref_poses;   ///< associated reference poses
+  std::vector<Pose> est_poses;   ///< associated estimate poses after alignment
   AlignmentResult alignment;
   std::vector<double> errors;
   ErrorStatistics stats;
@@ -203,11 +202,11 @@ struct RpeOptions {
   bool all_pairs = false;
   double rel_delta_tol = 0.1;  ///< evo's all-pairs tolerance, relative to delta
 
-  bool tum = false;            ///< evaluate_rpe.py semantics instead of evo's
-  bool fixed_delta = false;    ///< TUM --fixed_delta; else all pairs, or random ones
+  bool tum = false;               ///< evaluate_rpe.py semantics instead of evo's
+  bool fixed_delta = false;       ///< TUM --fixed_delta; else all pairs, or random ones
   std::size_t max_pairs = 10000;  ///< TUM --max_pairs (0 = all)
-  double scale = 1.0;          ///< TUM --scale
-  std::uint32_t seed = 0;      ///< for TUM's random pair sampling (its own RNG is not seeded)
+  double scale = 1.0;             ///< TUM --scale
+  std::uint32_t seed = 0;         ///< for TUM's random pair sampling (its own RNG is not seeded)
 };
 
 struct RpeResult {
@@ -217,7 +216,7 @@ struct RpeResult {
   /// the estimate file (est_pairs) and the ground-truth file (ref_pairs).
   std::vector<IndexPair> est_pairs;
   std::vector<IndexPair> ref_pairs;
-  std::vector<double> stamps;  ///< estimate stamp of the second pose of each pair [s]
+  std::vector<double> stamps;   ///< estimate stamp of the second pose of each pair [s]
   std::vector<Pose> ref_poses;  ///< evo mode: associated reference; TUM mode: whole ground truth
   std::vector<Pose> est_poses;  ///< evo mode: associated aligned estimate; TUM: whole estimate
   AlignmentResult alignment;
