@@ -305,6 +305,56 @@ TEST(SequenceFactory, MissingAndEmptyFolders) {
             (dir / "nope.png").string() + ": no such file");
 }
 
+TEST(SequenceFactory, SingleFramesOfEveryKind) {
+  PLANESLAM_REQUIRE_DATA();
+  const fs::path data = test::DataDir();
+  // A TUM fr3 depth PNG with the default (fr3) intrinsics.
+  const Frame tum =
+      LoadSingleFrame((data / "depth_frames" / "tum_fr3_long_office_1341848230.910894.png").string(),
+                      SensorConfig{});
+  EXPECT_EQ(tum.cloud.width, 640);
+  EXPECT_EQ(tum.cloud.model, SensorModel::kPinhole);
+  EXPECT_GT(tum.cloud.CountValid(), 100000u);
+  // ICL-NUIM's frame with its camera: rows above the centre get y > 0 (y-up camera).
+  SensorConfig icl;
+  icl.intrinsics = {640, 480, 481.2, 480.0, 319.5, 239.5};
+  icl.flip_y = true;
+  const Frame f = LoadSingleFrame((data / "depth_frames" / "icl_living_room_0.png").string(), icl);
+  std::size_t checked = 0;
+  for (int u = 0; u < 640; u += 16) {
+    const auto& p = f.cloud.at(10, u);
+    if (!OrganizedCloud::IsValid(p)) continue;
+    EXPECT_GT(p.y(), 0.0f);
+    ++checked;
+  }
+  EXPECT_GT(checked, 10u);
+  // The tunnel PNG is in millimetres.
+  SensorConfig mm;
+  mm.depth_scale = 1000.0;
+  const Frame tunnel = LoadSingleFrame((data / "depth_frames" / "cape_tunnel_depth_mm.png").string(), mm);
+  EXPECT_GT(tunnel.cloud.CountValid(), 10000u);
+  // An organized PCD and a KITTI scan.
+  const Frame pcd = LoadSingleFrame((data / "organized_pcd" / "office1.pcd").string(), SensorConfig{});
+  EXPECT_EQ(pcd.cloud.width, 640);
+  EXPECT_EQ(pcd.cloud.height, 480);
+  const Frame bin = LoadSingleFrame((data / "kitti_velodyne" / "000000.bin").string(), SensorConfig{});
+  EXPECT_EQ(bin.cloud.height, 64);
+  EXPECT_EQ(bin.cloud.model, SensorModel::kSpherical);
+  // Unknown extension.
+  EXPECT_NE(ErrorOf([&] { LoadSingleFrame((data / "README.md").string(), SensorConfig{}); })
+                .find("unknown file type '.md'"),
+            std::string::npos);
+}
+
+TEST(SequenceFactory, InvalidConfigIsConfigError) {
+  SensorConfig bad;
+  bad.depth_scale = 0;
+  bad.lidar_rows = 0;
+  EXPECT_EQ(bad.Validate().size(), 2u);
+  const auto dir = MakeTumFolder(test::ScratchDir(), {"1.0"}, {});
+  EXPECT_THROW(OpenSequence(dir.string(), bad), ConfigError);
+}
+
 TEST(SequenceFactory, EmptyFrameListIsIoError) {
   const auto dir = test::ScratchDir();
   WriteText(dir / "depth.txt", "# nothing\n");
