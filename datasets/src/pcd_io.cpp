@@ -24,7 +24,12 @@ std::string ToStr(std::int64_t v) { return std::to_string(v); }
 
 // Reads one element of a field as double (PCD binary data is little-endian on every platform PCL
 // writes on; we assume a little-endian host as PCL does).
-double ReadElement(const char* p, int size, char type) {
+inline double ReadElement(const char* p, int size, char type) {
+  if (type == 'F' && size == 4) {  // the common case first
+    float f;
+    std::memcpy(&f, p, 4);
+    return f;
+  }
   switch (type) {
     case 'F':
       if (size == 4) {
@@ -314,8 +319,13 @@ std::string LzfDecompress(const char* in, std::size_t in_size, std::size_t expec
         throw corrupt("decompresses to more than " + std::to_string(expected_size) + " bytes");
       }
       const unsigned char* ref = op - distance;
-      // Byte by byte: the source may overlap the destination (run-length style references).
-      for (std::size_t k = 0; k < len; ++k) *op++ = *ref++;
+      if (distance >= len) {
+        std::memcpy(op, ref, len);
+        op += len;
+      } else {
+        // Overlapping (run-length style) reference: must go byte by byte.
+        for (std::size_t k = 0; k < len; ++k) *op++ = *ref++;
+      }
     }
   }
   if (op != op_end) {
