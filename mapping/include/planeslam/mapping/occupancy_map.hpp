@@ -23,6 +23,7 @@
 namespace planeslam::mapping {
 
 struct OccupancyMapConfig {
+  bool enabled = true;  ///< whether 'planeslam run' builds and writes the map (the builder ignores it)
   double resolution = 0.05;        ///< [m] leaf voxel edge
   double max_range = 4.0;          ///< [m] longer rays only clear free space up to here; <= 0: none
   double downsample_voxel = 0.05;  ///< [m] voxel grid applied to each frame first; 0 = off
