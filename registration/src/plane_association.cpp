@@ -2,7 +2,6 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -40,8 +39,8 @@ struct PlaneInfo {
   bool ok = false;
   Eigen::Vector3d n = Eigen::Vector3d::UnitZ();
   double d = 0.0;
-  double var_n = 0.0;  ///< per tangent axis [rad^2]
-  double var_d = 0.0;  ///< [m^2]
+  double var_n = 0.0;   ///< per tangent axis [rad^2]
+  double var_d = 0.0;   ///< [m^2]
   double extent = 0.0;  ///< sqrt(largest scatter eigenvalue / K) [m], 0 = unknown
 };
 
@@ -197,8 +196,8 @@ AssociationResult AssociatePlanes(const std::vector<detection::Plane>& prev,
     for (int j = 0; j < static_cast<int>(curr.size()); ++j) {
       if (!ib[j].ok) continue;
       if (config.max_extent_ratio > 0 && ia[i].extent > 0 && ib[j].extent > 0) {
-        const double ratio = std::max(ia[i].extent, ib[j].extent) /
-                             std::min(ia[i].extent, ib[j].extent);
+        const double ratio =
+            std::max(ia[i].extent, ib[j].extent) / std::min(ia[i].extent, ib[j].extent);
         if (ratio > config.max_extent_ratio) continue;
       }
       for (int flip = 0; flip < 2; ++flip) {
@@ -234,10 +233,8 @@ AssociationResult AssociatePlanes(const std::vector<detection::Plane>& prev,
   }
 
   // 2. Pairwise consistency graph.
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es_prior(
-      prior.covariance.topLeftCorner<3, 3>());
-  const double sigma_t_prior =
-      std::sqrt(std::max(es_prior.eigenvalues().maxCoeff(), 0.0));
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es_prior(prior.covariance.topLeftCorner<3, 3>());
+  const double sigma_t_prior = std::sqrt(std::max(es_prior.eigenvalues().maxCoeff(), 0.0));
   const double t_slack = std::isfinite(sigma_t_prior) ? 3.0 * sigma_t_prior : 3.0;
   const double tol_angle0 = config.pair_angle_tolerance_deg * kDeg;
   const double parallel = config.parallel_angle_deg * kDeg;
@@ -265,9 +262,9 @@ AssociationResult AssociatePlanes(const std::vector<detection::Plane>& prev,
         const Eigen::Vector3d dn = a1.n + s * a2.n;
         const double e = (a1.d + s * a2.d) - (a.d_b + s * b.d_b) - dn.dot(t0);
         const double var_off = a1.var_d + a2.var_d + ib[a.j].var_d + ib[b.j].var_d;
-        const double tol = std::sqrt(config.pair_offset_tolerance * config.pair_offset_tolerance +
-                                     9.0 * var_off) +
-                           dn.norm() * t_slack;
+        const double tol =
+            std::sqrt(config.pair_offset_tolerance * config.pair_offset_tolerance + 9.0 * var_off) +
+            dn.norm() * t_slack;
         if (std::abs(e) > tol) continue;
       }
       adj[u][v / 64] |= std::uint64_t{1} << (v % 64);

@@ -2,12 +2,11 @@
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
-
 #include <algorithm>
 #include <cmath>
 
-#include "planeslam/datasets/errors.hpp"
 #include "plane_residual.hpp"
+#include "planeslam/datasets/errors.hpp"
 
 namespace planeslam::registration {
 
@@ -35,8 +34,8 @@ Eigen::Matrix4d PlaneCovarianceOrFallback(const detection::Plane& plane,
   // in-plane axis e_k moves points at spread sqrt(lambda_k) (lambda_k = sum of squared distances
   // along e_k), so Var = sigma^2 / lambda_k; the centroid moves by sigma^2 / K along n and
   // d = n.c couples the two (Cov(n, d) = Cov(n) c).
-  const double sigma2 =
-      std::max(std::isfinite(plane.mse) ? plane.mse : 0.0, fallback_point_sigma * fallback_point_sigma);
+  const double sigma2 = std::max(std::isfinite(plane.mse) ? plane.mse : 0.0,
+                                 fallback_point_sigma * fallback_point_sigma);
   const Eigen::Vector3d n = plane.normal.allFinite() && plane.normal.norm() > 0.5
                                 ? Eigen::Vector3d(plane.normal.normalized())
                                 : Eigen::Vector3d::UnitZ();
@@ -60,11 +59,12 @@ Eigen::Matrix4d PlaneCovarianceOrFallback(const detection::Plane& plane,
     e -= n * n.dot(e);  // keep the covariance orthogonal to n (unit-norm constraint)
     if (e.norm() < 1e-9) continue;
     e.normalize();
-    const double var = lambda(k) > 1e-12 && std::isfinite(lambda(k)) ? sigma2 / lambda(k)
-                                                                      : kUnknownNormalVar;
+    const double var =
+        lambda(k) > 1e-12 && std::isfinite(lambda(k)) ? sigma2 / lambda(k) : kUnknownNormalVar;
     cov_n += std::min(var, 1.0) * e * e.transpose();
   }
-  const Eigen::Vector3d c = plane.centroid.allFinite() ? plane.centroid : Eigen::Vector3d(n * plane.d);
+  const Eigen::Vector3d c =
+      plane.centroid.allFinite() ? plane.centroid : Eigen::Vector3d(n * plane.d);
   Eigen::Matrix4d cov = Eigen::Matrix4d::Zero();
   cov.topLeftCorner<3, 3>() = cov_n;
   cov.topRightCorner<3, 1>() = cov_n * c;
@@ -282,8 +282,7 @@ RegistrationResult RegisterPlanes(const std::vector<detection::Plane>& prev,
   } else if (null_r.size() == 1) {
     // All normals (anti)parallel: rotate the prior minimally so the best plane lines up; the
     // rotation about that normal stays the prior's.
-    const std::size_t best =
-        std::max_element(w_normal.begin(), w_normal.end()) - w_normal.begin();
+    const std::size_t best = std::max_element(w_normal.begin(), w_normal.end()) - w_normal.begin();
     const Eigen::Quaterniond q =
         Eigen::Quaterniond::FromTwoVectors(R * data[best].n_b, data[best].n_a);
     if (q.coeffs().allFinite()) R = q.toRotationMatrix() * R;

@@ -1,7 +1,6 @@
 #pragma once
 // Private: the per-match plane residual shared by registration and association.
 #include <Eigen/Core>
-
 #include <vector>
 
 #include "planeslam/registration/plane_registration.hpp"

@@ -44,13 +44,15 @@ Scene MakeScene(const std::vector<detection::Plane>& shared,
   std::vector<int> where_a(shared.size()), where_b(shared.size());
   for (std::size_t k = 0; k < a.size(); ++k) {
     detection::Plane p = a[k].first;
-    if (noise > 0) p = test::AddPlaneNoise(p, test::RandomPlaneNoise(rng, noise, noise, noise, noise), rng);
+    if (noise > 0)
+      p = test::AddPlaneNoise(p, test::RandomPlaneNoise(rng, noise, noise, noise, noise), rng);
     s.prev.push_back(p);
     if (a[k].second >= 0) where_a[a[k].second] = static_cast<int>(k);
   }
   for (std::size_t k = 0; k < b.size(); ++k) {
     detection::Plane p = b[k].first;
-    if (noise > 0) p = test::AddPlaneNoise(p, test::RandomPlaneNoise(rng, noise, noise, noise, noise), rng);
+    if (noise > 0)
+      p = test::AddPlaneNoise(p, test::RandomPlaneNoise(rng, noise, noise, noise, noise), rng);
     s.curr.push_back(p);
     if (b[k].second >= 0) where_b[b[k].second] = static_cast<int>(k);
   }
@@ -83,7 +85,8 @@ TEST(PlaneAssociation, FindsTheTrueMatchesAmongUnmatchedPlanes) {
                               RandomPlanes(extra(rng), rng), T, rng);
     const auto t0 = std::chrono::steady_clock::now();
     const AssociationResult a = AssociatePlanes(s.prev, s.curr, MotionPrior());
-    total_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    total_ms +=
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     total_planes += static_cast<int>(s.curr.size());
     EXPECT_FALSE(a.search_exhausted);
     EXPECT_EQ(AsSet(a.matches), s.truth) << "trial " << trial;
@@ -123,9 +126,9 @@ TEST(PlaneAssociation, RepeatedParallelWallsAreNotConfused) {
   for (int trial = 0; trial < 50; ++trial) {
     const Eigen::Matrix3d room = ExpSO3(RandomUnit(rng) * 1.0);
     const Eigen::Vector3d x = room.col(0), y = room.col(1), z = room.col(2);
-    const std::vector<detection::Plane> shared = {
-        MakePlane(x, 1.5), MakePlane(x, 2.0), MakePlane(-x, 1.4), MakePlane(-z, 1.2),
-        MakePlane((x + y).normalized(), 3.0)};
+    const std::vector<detection::Plane> shared = {MakePlane(x, 1.5), MakePlane(x, 2.0),
+                                                  MakePlane(-x, 1.4), MakePlane(-z, 1.2),
+                                                  MakePlane((x + y).normalized(), 3.0)};
     Pose T = Pose::Identity();
     T.linear() = ExpSO3(RandomUnit(rng) * 0.03);
     T.translation() = -0.25 * x;  // d of the +x walls shrinks by 0.25
@@ -160,8 +163,8 @@ TEST(PlaneAssociation, DegenerateInputsNeverFail) {
   const detection::Plane py = MakePlane(Eigen::Vector3d::UnitY(), 1.0);
   detection::Plane bad;
   bad.normal = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
-  const std::vector<std::vector<detection::Plane>> inputs = {
-      {}, {px}, {px, px}, {px, py}, {bad}, {bad, px}};
+  const std::vector<std::vector<detection::Plane>> inputs = {{},       {px},  {px, px},
+                                                             {px, py}, {bad}, {bad, px}};
   for (const auto& a : inputs) {
     for (const auto& b : inputs) {
       const AssociationResult r = AssociatePlanes(a, b, MotionPrior());

@@ -98,12 +98,11 @@ TEST(PlaneRegistration, ExactRecoveryWithRepeatedParallelWalls) {
     // Two parallel walls facing the same way (a wall and a cabinet front), the opposite wall,
     // a floor and an end wall, in a randomly rotated room.
     const Eigen::Matrix3d room = ExpSO3(RandomUnit(rng) * 0.7);
-    const std::vector<detection::Plane> planes = {
-        MakePlane(room * Eigen::Vector3d::UnitX(), 1.5),
-        MakePlane(room * Eigen::Vector3d::UnitX(), 2.7),
-        MakePlane(room * -Eigen::Vector3d::UnitX(), 1.2),
-        MakePlane(room * -Eigen::Vector3d::UnitZ(), 1.1),
-        MakePlane(room * Eigen::Vector3d::UnitY(), 4.0)};
+    const std::vector<detection::Plane> planes = {MakePlane(room * Eigen::Vector3d::UnitX(), 1.5),
+                                                  MakePlane(room * Eigen::Vector3d::UnitX(), 2.7),
+                                                  MakePlane(room * -Eigen::Vector3d::UnitX(), 1.2),
+                                                  MakePlane(room * -Eigen::Vector3d::UnitZ(), 1.1),
+                                                  MakePlane(room * Eigen::Vector3d::UnitY(), 4.0)};
     const Scene s = MakeScene(planes, T, 2, rng);
     const RegistrationResult r = RegisterPlanes(s.prev, s.curr, s.matches, MotionPrior());
     ASSERT_TRUE(AllFinite(r));
@@ -132,15 +131,16 @@ TEST(PlaneRegistration, CovarianceMatchesTheErrorDistribution) {
     std::vector<detection::Plane> truth_b = {MakePlane(room.col(0), ud(rng)),
                                              MakePlane(room.col(1), ud(rng)),
                                              MakePlane(room.col(2), ud(rng))};
-    for (int k = extra_count(rng); k > 0; --k) truth_b.push_back(MakePlane(RandomUnit(rng), ud(rng)));
+    for (int k = extra_count(rng); k > 0; --k)
+      truth_b.push_back(MakePlane(RandomUnit(rng), ud(rng)));
     std::vector<detection::Plane> prev, curr;
     std::vector<PlaneMatch> matches;
     for (std::size_t i = 0; i < truth_b.size(); ++i) {
       const detection::Plane truth_a = MovePlane(truth_b[i], T);
-      curr.push_back(test::AddPlaneNoise(truth_b[i],
-                                         test::RandomPlaneNoise(rng, 0.002, 0.01, 0.003, 0.012), rng));
-      prev.push_back(test::AddPlaneNoise(truth_a,
-                                         test::RandomPlaneNoise(rng, 0.002, 0.01, 0.003, 0.012), rng));
+      curr.push_back(test::AddPlaneNoise(
+          truth_b[i], test::RandomPlaneNoise(rng, 0.002, 0.01, 0.003, 0.012), rng));
+      prev.push_back(test::AddPlaneNoise(
+          truth_a, test::RandomPlaneNoise(rng, 0.002, 0.01, 0.003, 0.012), rng));
       matches.push_back({static_cast<int>(i), static_cast<int>(i), false});
     }
     const RegistrationResult r = RegisterPlanes(prev, curr, matches, MotionPrior(), config);
@@ -176,7 +176,8 @@ void ExpectNullSpace(const RegistrationResult& r, const std::vector<Eigen::Vecto
     const bool is_trans = d.tail<3>().norm() < 1e-12;
     const bool is_rot = d.head<3>().norm() < 1e-12;
     ASSERT_TRUE(is_trans || is_rot);
-    const Eigen::Vector3d v = is_trans ? Eigen::Vector3d(d.head<3>()) : Eigen::Vector3d(d.tail<3>());
+    const Eigen::Vector3d v =
+        is_trans ? Eigen::Vector3d(d.head<3>()) : Eigen::Vector3d(d.tail<3>());
     const auto& expected = is_trans ? trans : rot;
     // v must lie in the span of the expected directions.
     double in_span = 0.0;
@@ -193,8 +194,8 @@ TEST(PlaneRegistration, CorridorIsDegenerateAlongItsAxis) {
   for (int trial = 0; trial < 50; ++trial) {
     const Eigen::Matrix3d room = ExpSO3(RandomUnit(rng) * 2.0);
     const std::vector<detection::Plane> planes = {
-        MakePlane(room.col(1), 1.0), MakePlane(-room.col(1), 1.2),
-        MakePlane(room.col(2), 1.4), MakePlane(-room.col(2), 1.1)};
+        MakePlane(room.col(1), 1.0), MakePlane(-room.col(1), 1.2), MakePlane(room.col(2), 1.4),
+        MakePlane(-room.col(2), 1.1)};
     const Pose T = RandomPose(rng, 0.3, 0.2);
     const Eigen::Vector3d axis = T.linear() * room.col(0);  // in the previous frame
     MotionPrior prior;
@@ -280,9 +281,9 @@ TEST(PlaneRegistration, NoPlanesOrUnusablePlanesGiveThePrior) {
   // A prior with a broken covariance still gives a finite answer.
   MotionPrior broken = prior;
   broken.covariance(0, 0) = std::numeric_limits<double>::quiet_NaN();
-  const RegistrationResult rb = RegisterPlanes({MakePlane(Eigen::Vector3d::UnitX(), 1.0)},
-                                               {MakePlane(Eigen::Vector3d::UnitX(), 1.0)},
-                                               {{0, 0}}, broken);
+  const RegistrationResult rb =
+      RegisterPlanes({MakePlane(Eigen::Vector3d::UnitX(), 1.0)},
+                     {MakePlane(Eigen::Vector3d::UnitX(), 1.0)}, {{0, 0}}, broken);
   ASSERT_TRUE(AllFinite(rb));
 }
 

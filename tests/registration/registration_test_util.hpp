@@ -2,7 +2,6 @@
 // Helpers shared by the registration tests: random motions, planes with consistent noise.
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
-
 #include <cmath>
 #include <random>
 

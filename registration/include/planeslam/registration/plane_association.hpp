@@ -36,9 +36,9 @@ struct AssociationConfig {
   /// Current planes closer than this to the sensor are also tried with the opposite
   /// orientation (the sign of n is arbitrary for a plane through the origin) [m].
   double flip_max_offset = 0.05;
-  int max_candidates_per_plane = 6;   ///< keep the best-gated candidates of each prev plane [-]
-  int max_tied_cliques = 16;          ///< maximum cliques verified for the tie-break [-]
-  int max_search_nodes = 20000;       ///< branch-and-bound budget [-]
+  int max_candidates_per_plane = 6;  ///< keep the best-gated candidates of each prev plane [-]
+  int max_tied_cliques = 16;         ///< maximum cliques verified for the tie-break [-]
+  int max_search_nodes = 20000;      ///< branch-and-bound budget [-]
   /// Verification gate on a match's whitened residual (3 dof; 99.9% of chi^2(3) = 16.27) [-].
   double inlier_chi2 = 16.27;
 

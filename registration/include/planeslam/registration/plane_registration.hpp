@@ -9,7 +9,6 @@
 /// Covariances and information matrices are 6x6 over the tangent (dt, dtheta) of geometry.hpp:
 /// translation additive, rotation a left perturbation, both in the previous frame.
 #include <Eigen/Core>
-
 #include <string>
 #include <vector>
 
@@ -106,7 +105,7 @@ RegistrationResult RegisterPlanes(const std::vector<detection::Plane>& prev,
 /// association to verify candidates).
 std::vector<double> PlaneMatchChi2(const std::vector<detection::Plane>& prev,
                                    const std::vector<detection::Plane>& curr,
-                                   const std::vector<PlaneMatch>& matches,
-                                   const Pose& T_prev_curr, const RegistrationConfig& config = {});
+                                   const std::vector<PlaneMatch>& matches, const Pose& T_prev_curr,
+                                   const RegistrationConfig& config = {});
 
 }  // namespace planeslam::registration
