@@ -154,6 +154,21 @@ TEST(ImageIo, BadFilesAreIoErrorsNamingTheFile) {
             (dir / "rgb.png").string() + ": expected a single-channel (grey) PNG, got colour type 2");
 }
 
+TEST(ImageIo, EveryTruncationIsIoError) {
+  const auto dir = test::ScratchDir();
+  Image16 image(9, 7);
+  for (std::size_t i = 0; i < image.data.size(); ++i) image.data[i] = static_cast<std::uint16_t>(i * 977);
+  WritePng16((dir / "a.png").string(), image);
+  std::ifstream in(dir / "a.png", std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), {});
+  EXPECT_EQ(DecodePng16(bytes, "a.png").data, image.data);
+  for (std::size_t len = 0; len < bytes.size(); ++len) {
+    // IEND (the last 12 bytes) carries no pixels; libpng may accept a file cut inside it.
+    if (len >= bytes.size() - 12) continue;
+    EXPECT_THROW(DecodePng16(bytes.substr(0, len), "a.png"), IoError) << len;
+  }
+}
+
 TEST(ImageIo, HugeHeaderIsRefusedBeforeAllocating) {
   const auto dir = test::ScratchDir();
   // IHDR claims 10^6 x 10^6 = 10^12 pixels, with only two bytes of image data behind it.
