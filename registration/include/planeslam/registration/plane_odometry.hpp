@@ -1,0 +1,100 @@
+#pragma once
+/// Frame-to-frame odometry on planes: association, closed-form motion with covariance, the
+/// point-to-plane fallback along degenerate directions, a constant-velocity prior, and the
+/// accumulated pose. Used by the SLAM pipeline and `planeslam bench odometry`.
+#include <Eigen/Core>
+#include <cstddef>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "planeslam/datasets/organized_cloud.hpp"
+#include "planeslam/datasets/trajectory.hpp"
+#include "planeslam/detection/plane.hpp"
+#include "planeslam/registration/plane_association.hpp"
+#include "planeslam/registration/plane_registration.hpp"
+#include "planeslam/registration/point_to_plane.hpp"
+
+namespace planeslam::registration {
+
+struct PlaneOdometryConfig {
+  AssociationConfig association;
+  RegistrationConfig registration;
+  PointToPlaneConfig point_to_plane;
+  /// Fill the planes' degenerate directions by point-to-plane alignment of the clouds (pinhole
+  /// clouds only; intrinsics set or estimated from the grid).
+  bool use_point_to_plane = true;
+  /// Constant-velocity prior: 1-sigma of the change of motion between consecutive frames
+  /// (acceleration over one frame interval) [m].
+  double prior_translation_sigma = 0.05;
+  double prior_rotation_sigma = 0.05;  ///< same for rotation [rad]
+  /// Velocity is not extrapolated over a gap longer than this; the prior is then "no motion"
+  /// with MotionPrior's weak default covariance [s].
+  double max_prior_gap = 1.0;
+
+  /// Problems in this struct and the nested ones, empty when fine.
+  std::vector<std::string> Validate() const;
+};
+
+/// What one Process() call did.
+struct OdometryStep {
+  std::size_t frame = 0;  ///< 0 for the first frame
+  double timestamp = 0.0;
+  bool first_frame = false;  ///< no previous frame: identity motion, nothing estimated
+  Pose T_prev_curr = Pose::Identity();
+  Matrix6d covariance = Matrix6d::Zero();  ///< of T_prev_curr over (dt, dtheta), geometry.hpp
+  Pose T_world_sensor = Pose::Identity();  ///< accumulated
+  /// Flags (converged, degenerate + directions, used_prior, used_icp), inliers, residuals.
+  RegistrationResult registration;
+  MotionPrior prior;  ///< the constant-velocity prediction used
+  int planes_prev = 0;
+  int planes_curr = 0;
+  int candidates = 0;  ///< association candidates after gating
+  double association_ms = 0.0;
+  double point_to_plane_ms = 0.0;
+};
+
+/// Feed frames in time order; keeps the previous frame's planes and cloud.
+class PlaneOdometry {
+ public:
+  explicit PlaneOdometry(PlaneOdometryConfig config = {},
+                         const Pose& T_world_first = Pose::Identity());
+
+  /// Intrinsics of the (pinhole) clouds for the point-to-plane fallback; without them they are
+  /// estimated from the first cloud's grid (EstimatePinholeIntrinsics).
+  void SetIntrinsics(const datasets::PinholeIntrinsics& intrinsics) { intrinsics_ = intrinsics; }
+
+  /// Registers a frame against the previous one. `segmentation.planes` are in `cloud`'s frame.
+  OdometryStep Process(double timestamp, const datasets::OrganizedCloud& cloud,
+                       const detection::Segmentation& segmentation);
+  /// Same with only the planes (no point-to-plane fallback).
+  OdometryStep Process(double timestamp, const std::vector<detection::Plane>& planes);
+
+  const Pose& T_world_sensor() const { return T_world_sensor_; }
+  const datasets::Trajectory& trajectory() const { return trajectory_; }
+  const PlaneOdometryConfig& config() const { return config_; }
+  /// Forgets every frame; the next one starts at T_world_first.
+  void Reset(const Pose& T_world_first = Pose::Identity());
+
+ private:
+  OdometryStep Step(double timestamp, const std::vector<detection::Plane>& planes,
+                    const datasets::OrganizedCloud* cloud);
+  MotionPrior Predict(double timestamp) const;
+
+  PlaneOdometryConfig config_;
+  Pose T_world_first_;
+  Pose T_world_sensor_;
+  datasets::Trajectory trajectory_;
+  std::optional<datasets::PinholeIntrinsics> intrinsics_;
+  bool intrinsics_estimated_ = false;
+  bool have_prev_ = false;
+  double prev_stamp_ = 0.0;
+  std::vector<detection::Plane> prev_planes_;
+  datasets::OrganizedCloud prev_cloud_;
+  bool have_velocity_ = false;
+  Pose last_motion_ = Pose::Identity();
+  double last_dt_ = 0.0;
+  std::size_t frames_ = 0;
+};
+
+}  // namespace planeslam::registration

@@ -1,0 +1,126 @@
+#include "planeslam/registration/plane_odometry.hpp"
+
+#include <chrono>
+#include <cmath>
+
+namespace planeslam::registration {
+
+std::vector<std::string> PlaneOdometryConfig::Validate() const {
+  std::vector<std::string> p;
+  for (const auto& s : association.Validate()) p.push_back("association: " + s);
+  for (const auto& s : registration.Validate()) p.push_back("registration: " + s);
+  for (const auto& s : point_to_plane.Validate()) p.push_back("point_to_plane: " + s);
+  if (!(prior_translation_sigma > 0)) p.push_back("prior_translation_sigma must be > 0");
+  if (!(prior_rotation_sigma > 0)) p.push_back("prior_rotation_sigma must be > 0");
+  if (!(max_prior_gap > 0)) p.push_back("max_prior_gap must be > 0");
+  return p;
+}
+
+PlaneOdometry::PlaneOdometry(PlaneOdometryConfig config, const Pose& T_world_first)
+    : config_(std::move(config)), T_world_first_(T_world_first), T_world_sensor_(T_world_first) {}
+
+void PlaneOdometry::Reset(const Pose& T_world_first) {
+  T_world_first_ = T_world_first;
+  T_world_sensor_ = T_world_first;
+  trajectory_ = {};
+  have_prev_ = false;
+  prev_planes_.clear();
+  prev_cloud_ = {};
+  have_velocity_ = false;
+  last_motion_ = Pose::Identity();
+  last_dt_ = 0.0;
+  frames_ = 0;
+}
+
+MotionPrior PlaneOdometry::Predict(double timestamp) const {
+  MotionPrior prior;  // "no motion", weak: used without a velocity or across a long gap
+  const double dt = timestamp - prev_stamp_;
+  if (!have_velocity_ || !(dt > 0) || !(dt <= config_.max_prior_gap) || !(last_dt_ > 0)) {
+    return prior;
+  }
+  // Constant velocity: the last motion scaled to this interval in the (t, log R) tangent.
+  const double ratio = dt / last_dt_;
+  const Vector6d v = BoxMinus(last_motion_, Pose::Identity()) * ratio;
+  prior.T_prev_curr = BoxPlus(Pose::Identity(), v);
+  // The velocity may change by about sigma per frame interval of this length.
+  const double scale = std::max(ratio, 1e-3);
+  Vector6d sig;
+  sig << Eigen::Vector3d::Constant(config_.prior_translation_sigma * scale),
+      Eigen::Vector3d::Constant(config_.prior_rotation_sigma * scale);
+  prior.covariance = sig.array().square().matrix().asDiagonal();
+  return prior;
+}
+
+OdometryStep PlaneOdometry::Process(double timestamp, const datasets::OrganizedCloud& cloud,
+                                    const detection::Segmentation& segmentation) {
+  return Step(timestamp, segmentation.planes, &cloud);
+}
+
+OdometryStep PlaneOdometry::Process(double timestamp, const std::vector<detection::Plane>& planes) {
+  return Step(timestamp, planes, nullptr);
+}
+
+OdometryStep PlaneOdometry::Step(double timestamp, const std::vector<detection::Plane>& planes,
+                                 const datasets::OrganizedCloud* cloud) {
+  using Clock = std::chrono::steady_clock;
+  OdometryStep step;
+  step.frame = frames_++;
+  step.timestamp = timestamp;
+  step.planes_curr = static_cast<int>(planes.size());
+  if (!have_prev_) {
+    step.first_frame = true;
+    step.T_world_sensor = T_world_sensor_;
+    step.registration.converged = false;
+    step.registration.covariance = Matrix6d::Zero();
+  } else {
+    step.planes_prev = static_cast<int>(prev_planes_.size());
+    step.prior = Predict(timestamp);
+    const auto t0 = Clock::now();
+    AssociationResult assoc = AssociatePlanes(prev_planes_, planes, step.prior, config_.association,
+                                              config_.registration);
+    step.association_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+    step.candidates = assoc.candidates;
+    RegistrationResult reg = std::move(assoc.registration);
+    const bool can_align = config_.use_point_to_plane && cloud != nullptr && !cloud->empty() &&
+                           cloud->model == datasets::SensorModel::kPinhole &&
+                           !prev_cloud_.empty() && prev_cloud_.width == cloud->width &&
+                           prev_cloud_.height == cloud->height;
+    if (reg.degenerate && can_align) {
+      if (!intrinsics_ && !intrinsics_estimated_) {
+        intrinsics_ = EstimatePinholeIntrinsics(prev_cloud_);
+        intrinsics_estimated_ = true;  // one attempt: the grid does not change
+      }
+      if (intrinsics_) {
+        const auto t1 = Clock::now();
+        FillDegenerateWithPointToPlane(prev_cloud_, *intrinsics_, *cloud, config_.point_to_plane,
+                                       &reg);
+        step.point_to_plane_ms =
+            std::chrono::duration<double, std::milli>(Clock::now() - t1).count();
+      }
+    }
+    step.T_prev_curr = reg.T_prev_curr;
+    step.covariance = reg.covariance;
+    step.registration = std::move(reg);
+    T_world_sensor_ = T_world_sensor_ * step.T_prev_curr;
+    // Re-orthonormalise so thousands of products do not drift off SO(3).
+    T_world_sensor_.linear() =
+        Eigen::Quaterniond(T_world_sensor_.linear()).normalized().toRotationMatrix();
+    step.T_world_sensor = T_world_sensor_;
+    const double dt = timestamp - prev_stamp_;
+    have_velocity_ = dt > 0;
+    last_motion_ = step.T_prev_curr;
+    last_dt_ = dt;
+  }
+  trajectory_.Add(timestamp, T_world_sensor_);
+  have_prev_ = true;
+  prev_stamp_ = timestamp;
+  prev_planes_ = planes;
+  if (cloud) {
+    prev_cloud_ = *cloud;
+  } else {
+    prev_cloud_ = {};
+  }
+  return step;
+}
+
+}  // namespace planeslam::registration

@@ -1,0 +1,140 @@
+// Frame-to-frame plane odometry: accumulated poses, constant-velocity prior, fallbacks.
+#include "planeslam/registration/plane_odometry.hpp"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "registration/corridor_scene.hpp"
+
+namespace planeslam::registration {
+namespace {
+
+using test::MakePlane;
+
+/// World planes of a 6 x 5 x 2.7 m room, plus a table top, in the camera at T_world_cam.
+std::vector<detection::Plane> RoomPlanes(const Pose& T_world_cam) {
+  const std::vector<std::pair<Eigen::Vector3d, double>> world = {
+      {Eigen::Vector3d::UnitX(), 3.0},  {Eigen::Vector3d::UnitX(), -3.0},
+      {Eigen::Vector3d::UnitY(), 2.5},  {Eigen::Vector3d::UnitY(), -2.5},
+      {Eigen::Vector3d::UnitZ(), -1.2}, {Eigen::Vector3d::UnitZ(), 1.5},
+      {Eigen::Vector3d::UnitZ(), -0.45}};
+  std::vector<detection::Plane> out;
+  for (const auto& [n, k] : world) {
+    out.push_back(
+        MakePlane(T_world_cam.linear().transpose() * n, k - n.dot(T_world_cam.translation())));
+  }
+  return out;
+}
+
+/// A smooth, non-constant-velocity path inside the room (30 Hz).
+Pose PathPose(int i) {
+  const double s = i / 30.0;
+  Pose T = Pose::Identity();
+  T.linear() = test::LookAlongX() *
+               ExpSO3(Eigen::Vector3d(0.1 * std::sin(s), 0.4 * s, 0.05 * std::cos(2 * s)));
+  T.translation() << 0.5 * std::sin(0.8 * s), 0.3 * s - 0.5, 0.1 * std::cos(s);
+  return T;
+}
+
+TEST(PlaneOdometry, FollowsAPathThroughARoomExactly) {
+  PlaneOdometry odo({}, PathPose(0));
+  for (int i = 0; i < 60; ++i) {
+    const OdometryStep step = odo.Process(i / 30.0, RoomPlanes(PathPose(i)));
+    EXPECT_EQ(step.first_frame, i == 0);
+    EXPECT_EQ(step.frame, static_cast<std::size_t>(i));
+    if (i > 0) {
+      EXPECT_TRUE(step.registration.converged);
+      EXPECT_FALSE(step.registration.degenerate);
+      EXPECT_EQ(step.registration.inliers.size(), 7u);
+      EXPECT_TRUE(step.covariance.allFinite());
+    }
+    EXPECT_LT(test::TranslationError(step.T_world_sensor, PathPose(i)), 1e-8) << "frame " << i;
+    EXPECT_LT(test::RotationError(step.T_world_sensor, PathPose(i)), 1e-8) << "frame " << i;
+  }
+  EXPECT_EQ(odo.trajectory().size(), 60u);
+}
+
+TEST(PlaneOdometry, FramesWithoutPlanesContinueWithConstantVelocity) {
+  // Constant velocity: the prediction is exact, so a frame without planes loses nothing.
+  Pose motion = Pose::Identity();
+  motion.linear() = ExpSO3(Eigen::Vector3d(0.0, 0.02, 0.01));
+  motion.translation() << 0.02, 0.0, 0.05;
+  Pose truth = Pose::Identity();
+  truth.linear() = test::LookAlongX();
+  PlaneOdometry odo({}, truth);
+  double t = 0.0;
+  for (int i = 0; i < 12; ++i) {
+    if (i > 0) {
+      truth = truth * motion;
+      t += 1.0 / 30.0;
+    }
+    const bool blind = i == 5 || i == 6;
+    const OdometryStep step =
+        odo.Process(t, blind ? std::vector<detection::Plane>{} : RoomPlanes(truth));
+    if (blind) {
+      EXPECT_FALSE(step.registration.converged);
+      EXPECT_TRUE(step.registration.used_prior);
+      EXPECT_EQ(step.registration.degenerate_directions.size(), 6u);
+      EXPECT_TRUE(step.covariance.isApprox(step.prior.covariance));
+    }
+    EXPECT_TRUE(step.T_world_sensor.matrix().allFinite());
+    EXPECT_LT(test::TranslationError(step.T_world_sensor, truth), 1e-8) << "frame " << i;
+    EXPECT_LT(test::RotationError(step.T_world_sensor, truth), 1e-8) << "frame " << i;
+  }
+}
+
+TEST(PlaneOdometry, CorridorAxisComesFromThePointsWhenThePriorIsWrong) {
+  // The camera accelerates down a corridor with a cabinet and a pillar: the constant-velocity
+  // prior is wrong along the axis every frame, the four planes cannot see it, the clouds can.
+  std::mt19937 rng(8);
+  const test::CorridorScene scene = test::MakeCorridor(true);
+  const datasets::PinholeIntrinsics k = test::SmallCamera();
+  auto pose = [](int i) {
+    Pose T = Pose::Identity();
+    T.linear() = test::LookAlongX() * ExpSO3(Eigen::Vector3d(0.0, 0.01 * i, 0.0));
+    T.translation() << 0.02 * i * i, 0.1, 0.0;  // accelerating along the axis
+    return T;
+  };
+  PlaneOdometryConfig config;
+  config.point_to_plane.pixel_stride = 1;  // small test image
+  PlaneOdometry odo(config, pose(0));
+  for (int i = 0; i < 6; ++i) {
+    detection::Segmentation seg;
+    seg.width = k.width;
+    seg.height = k.height;
+    seg.planes = test::CorridorPlanesInCamera(scene, pose(i));
+    const OdometryStep step =
+        odo.Process(i * 0.1, test::RayCast(scene, k, pose(i), 0.001, rng), seg);
+    if (i > 0) {
+      EXPECT_TRUE(step.registration.degenerate);
+      EXPECT_TRUE(step.registration.used_icp) << "frame " << i;
+      EXPECT_FALSE(step.registration.used_prior) << "frame " << i;
+    }
+    EXPECT_LT(test::TranslationError(step.T_world_sensor, pose(i)), 0.005) << "frame " << i;
+    EXPECT_LT(test::RotationError(step.T_world_sensor, pose(i)), 1e-6) << "frame " << i;
+  }
+}
+
+TEST(PlaneOdometry, ResetStartsOver) {
+  PlaneOdometry odo;
+  odo.Process(0.0, RoomPlanes(PathPose(0)));
+  odo.Process(0.1, RoomPlanes(PathPose(3)));
+  odo.Reset(PathPose(10));
+  const OdometryStep s = odo.Process(1.0, RoomPlanes(PathPose(10)));
+  EXPECT_TRUE(s.first_frame);
+  EXPECT_TRUE(s.T_world_sensor.isApprox(PathPose(10)));
+  EXPECT_EQ(odo.trajectory().size(), 1u);
+}
+
+TEST(PlaneOdometry, ConfigValidation) {
+  PlaneOdometryConfig c;
+  EXPECT_TRUE(c.Validate().empty());
+  c.registration.max_translation_sigma = -1;
+  c.association.max_candidates_per_plane = 0;
+  c.prior_rotation_sigma = 0;
+  EXPECT_EQ(c.Validate().size(), 3u);
+}
+
+}  // namespace
+}  // namespace planeslam::registration
