@@ -131,7 +131,9 @@ class EvalCommand : public Command {
     sub.add_flag("--fixed-delta", fixed_delta_,
                  "rpe --tum: pairs (i, frame nearest t_i + delta) instead of all/random pairs");
     sub.add_option("--max-pairs", max_pairs_, "rpe --tum: at most this many pairs (0 = all)");
-    sub.add_option("--scale", scale_, "rpe --tum: scale applied to the estimate's motion");
+    sub.add_option("--scale", scale_,
+                   "scale applied to the estimate's positions (ape) or motions (rpe --tum), as the "
+                   "TUM tools' --scale");
     sub.add_option("--seed", seed_, "rpe --tum: seed of the random pair sampling");
     sub.add_option("--json", json_path_, "also write the results as JSON to this file");
     sub.add_option("--plot", plot_dir_,
@@ -262,6 +264,7 @@ class EvalCommand : public Command {
     options.association = association;
     options.alignment = alignment;
     options.relation = relation;
+    options.scale = scale_;
     const ds::ApeResult r = ds::EvaluateApe(ref, est, options, ref_path_, est_path_);
     if (!r.ok) return Fail(est_path_ + ": " + r.message);
 

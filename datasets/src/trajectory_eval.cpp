@@ -517,6 +517,7 @@ ApeResult EvaluateApe(const Trajectory& ref, const Trajectory& est, const ApeOpt
   for (const IndexPair& p : result.pairs) {
     result.ref_poses.push_back(ref.poses[p.first]);
     result.est_poses.push_back(est.poses[p.second]);
+    result.est_poses.back().translation() *= options.scale;
     result.stamps.push_back(est.stamps[p.second]);
   }
   result.alignment = AlignTrajectory(result.ref_poses, result.est_poses, options.alignment);

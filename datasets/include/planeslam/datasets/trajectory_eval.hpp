@@ -173,6 +173,7 @@ struct ApeOptions {
   AssociationOptions association;
   AlignmentOptions alignment;
   PoseRelation relation = PoseRelation::kTranslation;
+  double scale = 1.0;  ///< estimate positions multiplied by this first (evaluate_ate.py --scale)
 };
 
 struct ApeResult {
