@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <map>
 #include <utility>
 
 #include "planeslam/datasets/errors.hpp"
@@ -29,19 +28,24 @@ std::int64_t FloorIndex(double x, double cell) {
 /// Mean point per cell of a grid on the plane (basis) of the points; deterministic order (by cell).
 std::vector<Eigen::Vector3f> GridSamples(const std::vector<Eigen::Vector3f>& points,
                                          const PlaneBasis& basis, double cell) {
-  std::map<std::pair<std::int64_t, std::int64_t>, std::pair<Eigen::Vector3d, int>> cells;
+  std::unordered_map<std::int64_t, std::pair<Eigen::Vector3d, int>> cells;
   for (const auto& pf : points) {
     if (!pf.allFinite()) continue;
     const Eigen::Vector3d p = pf.cast<double>();
     const Eigen::Vector2d xy = basis.Project(p);
-    auto& c = cells[{FloorIndex(xy.x(), cell), FloorIndex(xy.y(), cell)}];
+    auto& c = cells[CellKey(FloorIndex(xy.x(), cell), FloorIndex(xy.y(), cell))];
     if (c.second == 0) c.first.setZero();
     c.first += p;
     ++c.second;
   }
+  std::vector<std::pair<std::int64_t, Eigen::Vector3f>> sorted;
+  sorted.reserve(cells.size());
+  for (const auto& [key, c] : cells) sorted.emplace_back(key, (c.first / c.second).cast<float>());
+  std::sort(sorted.begin(), sorted.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
   std::vector<Eigen::Vector3f> samples;
-  samples.reserve(cells.size());
-  for (const auto& [key, c] : cells) samples.push_back((c.first / c.second).cast<float>());
+  samples.reserve(sorted.size());
+  for (const auto& kv : sorted) samples.push_back(kv.second);
   return samples;
 }
 
@@ -394,6 +398,22 @@ FrameAssociation PlaneMap::AddObservations(
     const int best_id = candidates.front().second;
     {
       MapPlane& m = planes_[IndexOf(best_id)];
+      Extent& e = extents_[IndexOf(best_id)];
+      // Keep only the samples that extend the plane's known extent: the samples of a plane then
+      // grow with its area, not with the number of keyframes that saw it (a floor seen by 1000
+      // keyframes would otherwise hold 1000 copies of itself). After a Refit, the overlap they
+      // duplicated stays covered by the earlier observations (moved by their own corrections).
+      std::vector<Eigen::Vector3f> novel;
+      std::vector<Eigen::Vector3d> novel_world;
+      for (std::size_t s = 0; s < samples.size(); ++s) {
+        const Eigen::Vector2d xy = e.basis.Project(samples[s]);
+        if (e.fine.count(CellKey(FloorIndex(xy.x(), e.cell), FloorIndex(xy.y(), e.cell))) == 0) {
+          novel.push_back(obs.samples_sensor[s]);
+          novel_world.push_back(samples[s]);
+        }
+      }
+      obs.samples_sensor = std::move(novel);
+      samples = std::move(novel_world);
       m.observations.push_back(std::move(obs));
       // Incremental update of the fit (Refit recomputes from scratch with the same formulas).
       m.stats_world.Merge(world);
@@ -404,7 +424,6 @@ FrameAssociation PlaneMap::AddObservations(
       m.mse = mf.mse;
       m.first_keyframe = std::min(m.first_keyframe, keyframe_id);
       m.last_keyframe = std::max(m.last_keyframe, keyframe_id);
-      Extent& e = extents_[IndexOf(best_id)];
       if (m.normal.dot(e.basis.normal) < cos_rebuild) {
         RebuildExtent(m);
       } else {

@@ -295,6 +295,26 @@ TEST(PlaneMap, PlaneSeenInTwoSeparateHalvesMergesWhenTheGapIsSeen) {
   EXPECT_NEAR(o.polygon.area, 6.0 * 2.5, 0.15 * 6.0 * 2.5);
 }
 
+TEST(PlaneMap, SamplesGrowWithAreaNotWithKeyframes) {
+  // The same wall part seen 20 times keeps about one observation's samples; a new part adds.
+  const std::vector<Rect> wall = {{{0, 4, 0}, {6, 0, 0}, {0, 0, 2.5}}};
+  std::mt19937 rng(8);
+  PlaneMap map;
+  const Pose T = LookPose(Eigen::Vector3d(3, 1, 1.2), M_PI / 2, 0);
+  std::size_t first = 0;
+  for (int k = 0; k < 20; ++k) {
+    const SimFrame f = Simulate(wall, 0.02, T, Window(0, 3), 0.005, rng);
+    map.AddObservations(k, T, f.planes, f.points);
+    if (k == 0) first = map.WorldSamples(map.planes()[0]).size();
+  }
+  ASSERT_EQ(map.size(), 1u);
+  EXPECT_EQ(map.planes()[0].observations.size(), 20u);
+  EXPECT_LT(map.WorldSamples(map.planes()[0]).size(), first * 13 / 10);
+  const SimFrame f = Simulate(wall, 0.02, T, Window(3, 6), 0.005, rng);
+  map.AddObservations(20, T, f.planes, f.points);
+  EXPECT_GT(map.WorldSamples(map.planes()[0]).size(), first * 18 / 10);
+}
+
 TEST(PlaneMap, CoplanarButDistantOrOppositePlanesStayApart) {
   // Two table tops at the same height 3 m apart, and the two faces of a 10 cm thick partition.
   const std::vector<Rect> rects = {

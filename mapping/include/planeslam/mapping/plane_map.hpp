@@ -80,7 +80,9 @@ struct PlaneObservation {
   int detection_id = 0;         ///< the plane's id in its frame's segmentation
   PointStats stats_sensor;      ///< point statistics in the sensor frame
   Eigen::Vector3d normal_sensor = Eigen::Vector3d::UnitZ();  ///< detected normal (sensor frame)
-  std::vector<Eigen::Vector3f> samples_sensor;  ///< mean point per sample cell [m], sensor frame
+  /// Mean point per sample cell [m], sensor frame; only the samples that extended the map plane's
+  /// extent when the observation was added (memory grows with area, not with keyframes).
+  std::vector<Eigen::Vector3f> samples_sensor;
 };
 
 /// A plane of the map, in the world frame.
