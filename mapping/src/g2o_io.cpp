@@ -153,8 +153,10 @@ PoseGraph ParseG2o(std::istream& in, const std::string& name) {
         }
       }
       edge.information = InformationFromG2o(g2o_information);
-      if (g2o_information.llt().info() != Eigen::Success ||
-          edge.information.llt().info() != Eigen::Success) {
+      // Eigen's LLT reports success on NaN pivots (overflow of huge entries): check the factor.
+      const Eigen::LLT<Matrix6d> llt(edge.information);
+      if (g2o_information.llt().info() != Eigen::Success || llt.info() != Eigen::Success ||
+          !Matrix6d(llt.matrixL()).allFinite()) {
         line.Fail("information matrix is not positive definite");
       }
       edge.kind = edge.to == edge.from + 1 ? EdgeKind::kOdometry : EdgeKind::kLoopClosure;

@@ -58,7 +58,8 @@ void PoseGraph::AddEdge(const PoseGraphEdge& edge) {
                       (edge.information - edge.information.transpose()).cwiseAbs().maxCoeff() <=
                           1e-9 * edge.information.cwiseAbs().maxCoeff(),
                   "edge " << edge.from << "->" << edge.to << ": information not symmetric");
-  PLANESLAM_CHECK(edge.information.llt().info() == Eigen::Success,
+  const Eigen::LLT<Matrix6d> llt(edge.information);
+  PLANESLAM_CHECK(llt.info() == Eigen::Success && Matrix6d(llt.matrixL()).allFinite(),
                   "edge " << edge.from << "->" << edge.to
                           << ": information not positive definite");
   edges_.push_back(edge);

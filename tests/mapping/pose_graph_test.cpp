@@ -264,8 +264,12 @@ TEST(PoseGraph, ParkingGarageMatchesCeresExample) {
   config.loop_closure_loss = "none";
   const PoseGraphResult result = OptimizePoseGraph(graph, config);
   EXPECT_TRUE(result.converged) << result.message;
-  EXPECT_NEAR(result.initial_cost, 8.362723e+03, 1e-3 * 8.362723e+03);
-  EXPECT_NEAR(result.final_cost, 6.341883e-01, 1e-2 * 6.341883e-01);
+  // The example whitens with the lower Cholesky factor L (|L r|^2 = r^T L^T L r, not r^T I r); we
+  // use U = L^T. With these nearly diagonal matrices that moves the figures by < 1e-5 (measured:
+  // initial 8362.720, final 0.6341936, 20 iterations).
+  EXPECT_NEAR(result.initial_cost, 8.362723e+03, 1e-5 * 8.362723e+03);
+  EXPECT_NEAR(result.final_cost, 6.341883e-01, 1e-4 * 6.341883e-01);
+  EXPECT_NEAR(result.iterations, 20, 2);
 }
 
 }  // namespace
