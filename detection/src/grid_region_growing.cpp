@@ -196,7 +196,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         if (nx < 0 || ny < 0 || nx >= cells_x || ny >= cells_y) continue;
         const int nb = ny * cells_x + nx;
         if (ws.classes[nb] != CellClass::kPlanar) continue;
-        if (ws.cell_region[nb] >= 0 || ws.queued[nb] == r) continue;  // in a plane or queued
+        if (ws.used[nb] || ws.queued[nb] == r) continue;  // in R, R' or this region; queued
         ws.queued[nb] = r;
         ws.queue.push_back(nb);
       }
@@ -205,7 +205,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     while (head < ws.queue.size()) {
       const int g = ws.queue[head++];
       ws.queued[g] = -1;  // may be queued again by a later neighbour if rejected now
-      if (ws.cell_region[g] >= 0) continue;
+      if (ws.used[g]) continue;
       const CellInfo& ci = ws.info[g];
       // Algorithm 2 line 8: angle, coplanarity, then the merged MSE (the only one needing a fit).
       const MomentSums& gs = ws.sums[g];
@@ -247,7 +247,10 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     if (ws.members.size() >= theta_grids) {
       ws.regions.push_back(region);
     } else {
-      for (int c : ws.members) ws.cell_region[c] = -1;  // R': not a seed again, but claimable
+      // R' (Algorithm 2 line 15): these grids leave G, as in the paper: they neither seed nor join
+      // later regions (letting later regions re-grow into them made the growth quadratic on
+      // cluttered scans). Boundary refinement may still give their pixels to a plane.
+      for (int c : ws.members) ws.cell_region[c] = -1;
     }
   }
 

@@ -109,7 +109,7 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
         const int x = sx + ox;
         if ((ox == 0 && oy == 0) || x < 0 || x >= width) continue;
         const int i = y * width + x;
-        if (ws.rel2[i] < 0 || ws.labels[i] >= 0) continue;
+        if (ws.rel2[i] < 0 || ws.labels[i] >= 0 || ws.visited[i]) continue;
         if ((pts[i] - ps).norm() < delta_s) nb[n_nb++] = i;
       }
     }
@@ -162,6 +162,7 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
         }
         const int owner = ws.labels[c];
         if (owner == r || ws.rel2[c] < 0) continue;
+        if (owner < 0 && ws.visited[c]) continue;  // in R': left PCD (Algorithm 1 line 3)
         const Eigen::Vector3f& pcf = pts[c];
         const double zc = internal::PointDepth(pcf, spherical);
         if ((pcf - pq).norm() >= params_.Delta(zc)) continue;  // dis(GR, p_c) < delta
@@ -242,7 +243,7 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
       ws.regions.push_back(region);
       ws.fits.push_back(FitSums(region));
     } else {
-      for (int m : ws.members) ws.labels[m] = -1;  // R': claimable by later regions
+      for (int m : ws.members) ws.labels[m] = -1;  // R': out of PCD, no seed, no growth
       for (const auto& [point, owner] : ws.stolen) {  // joint points go back to their plane
         const Eigen::Vector3f& q = pts[point];
         ws.regions[owner].Add(q.x(), q.y(), q.z(), ws.rel2[point]);

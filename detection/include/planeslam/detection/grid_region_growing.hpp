@@ -15,7 +15,8 @@
 ///    (Algorithm 2 line 8), and the region's plane is refitted from the merged moments after every
 ///    join (eq. 5-6). A rejected grid may be tested again when another of its neighbours joins
 ///    (the region's plane has changed since). Regions of >= ceil(theta / k^2) grids are planes;
-///    the grids of smaller (uncertain) regions never seed again but later regions may take them.
+///    the grids of smaller (uncertain) regions leave G as in the paper: they neither seed nor join
+///    later regions (their pixels may still be given to a plane by the refinement).
 /// 4. Beyond the paper (both optional, on by default): boundary refinement gives each valid pixel
 ///    of a grid outside every plane, with a plane among its 8 neighbour grids, to the best-fitting
 ///    such plane when |n.p - d| < gamma(z) (with refine_sigmas); then adjacent regions describing

@@ -10,7 +10,7 @@
 /// neighbour p_c of a region point p_q with |p_c - p_q| < delta joins when
 ///   |n(GR u p_c) . p_c - d(GR u p_c)| < gamma  and  MSE(GR u p_c) < epsilon   (Alg. 1 line 9).
 /// Regions of >= theta points are planes (R), smaller ones uncertain (R', Alg. 1 line 17 read as
-/// R' <- R' u GR); points of R' never seed again but later regions may take them.
+/// R' <- R' u GR); points of R' leave PCD as in the paper (no seed, no growth into them).
 ///
 /// Shared points: the paper lets a point on a joint belong to two planes. Here growth may enter
 /// the points of earlier planes (they are tested like any other point), and such a shared point

@@ -1,0 +1,285 @@
+// `planeslam detect INPUT --out DIR`: planes of one range image (depth PNG or organized PCD).
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <iostream>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "cli_common.hpp"
+#include "command_registry.hpp"
+#include "detector_factory.hpp"
+#include "planeslam/datasets/atomic_file.hpp"
+#include "planeslam/datasets/errors.hpp"
+#include "planeslam/datasets/image_io.hpp"
+#include "planeslam/datasets/sensor_config.hpp"
+#include "planeslam/datasets/sequence_factory.hpp"
+
+namespace planeslam::app {
+namespace {
+
+namespace ds = planeslam::datasets;
+using Clock = std::chrono::steady_clock;
+
+double Ms(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+/// Distinct colour of plane `id` (golden-ratio hue steps, full saturation, bright).
+void PlaneColour(int id, std::uint8_t rgb[3]) {
+  const double h = std::fmod(0.13 + 0.618033988749895 * id, 1.0) * 6.0;
+  const double s = (id % 3 == 0) ? 0.55 : 0.85, v = (id % 2 == 0) ? 0.85 : 1.0;
+  const int i = static_cast<int>(h);
+  const double f = h - i, p = v * (1 - s), q = v * (1 - s * f), t = v * (1 - s * (1 - f));
+  double r, g, b;
+  switch (i % 6) {
+    case 0: r = v; g = t; b = p; break;
+    case 1: r = q; g = v; b = p; break;
+    case 2: r = p; g = v; b = t; break;
+    case 3: r = p; g = q; b = v; break;
+    case 4: r = t; g = p; b = v; break;
+    default: r = v; g = p; b = q; break;
+  }
+  rgb[0] = static_cast<std::uint8_t>(std::lround(255 * r));
+  rgb[1] = static_cast<std::uint8_t>(std::lround(255 * g));
+  rgb[2] = static_cast<std::uint8_t>(std::lround(255 * b));
+}
+
+/// Grey level of each valid pixel from its range (near = light), 0 for invalid pixels.
+std::vector<std::uint8_t> GreyRendering(const ds::OrganizedCloud& cloud) {
+  std::vector<std::uint8_t> grey(cloud.size(), 0);
+  float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+  for (const auto& p : cloud.points) {
+    if (!ds::OrganizedCloud::IsValid(p)) continue;
+    const float r = p.norm();
+    lo = std::min(lo, r);
+    hi = std::max(hi, r);
+  }
+  const float span = hi > lo ? hi - lo : 1.0f;
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const auto& p = cloud.points[i];
+    if (!ds::OrganizedCloud::IsValid(p)) continue;
+    grey[i] = static_cast<std::uint8_t>(60 + 170 * (1.0f - (p.norm() - lo) / span));
+  }
+  return grey;
+}
+
+std::string PlyBytes(const ds::OrganizedCloud& cloud, const detection::Segmentation& seg,
+                     const std::vector<std::uint8_t>& grey) {
+  std::size_t n = 0;
+  for (const auto& p : cloud.points) n += ds::OrganizedCloud::IsValid(p) ? 1 : 0;
+  std::string out =
+      "ply\nformat binary_little_endian 1.0\ncomment planeslam detect: colour = plane, grey = "
+      "none\nelement vertex " +
+      std::to_string(n) +
+      "\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\n"
+      "property uchar green\nproperty uchar blue\nproperty int plane_id\nend_header\n";
+  const std::size_t header = out.size();
+  out.resize(header + n * 19);
+  char* w = out.data() + header;
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const auto& p = cloud.points[i];
+    if (!ds::OrganizedCloud::IsValid(p)) continue;
+    const float xyz[3] = {p.x(), p.y(), p.z()};
+    std::memcpy(w, xyz, 12);  // x86/ARM hosts are little-endian, as the header says
+    std::uint8_t rgb[3] = {grey[i], grey[i], grey[i]};
+    const std::int32_t id = seg.labels[i] >= 1 ? seg.labels[i] : 0;
+    if (id > 0) PlaneColour(id, rgb);
+    std::memcpy(w + 12, rgb, 3);
+    std::memcpy(w + 15, &id, 4);
+    w += 19;
+  }
+  return out;
+}
+
+nlohmann::json PlanesJson(const std::string& input, const std::string& method,
+                          const ds::OrganizedCloud& cloud, const detection::Segmentation& seg,
+                          std::size_t valid, std::size_t assigned, double detect_ms) {
+  nlohmann::json j;
+  j["input"] = input;
+  j["method"] = method;
+  j["frame"] = "sensor";
+  j["width"] = cloud.width;
+  j["height"] = cloud.height;
+  j["valid_pixels"] = valid;
+  j["assigned_pixels"] = assigned;
+  j["detect_ms"] = detect_ms;
+  nlohmann::json timings = nlohmann::json::object();
+  for (const auto& [stage, ms] : seg.timings_ms) timings[stage] = ms;
+  j["timings_ms"] = timings;
+  j["planes"] = nlohmann::json::array();
+  for (const auto& p : seg.planes) {
+    nlohmann::json jp;
+    jp["id"] = p.id;
+    jp["normal"] = {p.normal.x(), p.normal.y(), p.normal.z()};
+    jp["d"] = p.d;
+    jp["centroid"] = {p.centroid.x(), p.centroid.y(), p.centroid.z()};
+    jp["points"] = p.point_count;
+    jp["mse"] = p.mse;
+    jp["rms"] = std::sqrt(p.mse);
+    jp["eigenvalues"] = {p.eigenvalues.x(), p.eigenvalues.y(), p.eigenvalues.z()};
+    nlohmann::json cov = nlohmann::json::array();
+    for (int r = 0; r < 4; ++r) {
+      cov.push_back({p.covariance(r, 0), p.covariance(r, 1), p.covariance(r, 2), p.covariance(r, 3)});
+    }
+    jp["covariance"] = cov;  // of (n_x, n_y, n_z, d), rank 3
+    j["planes"].push_back(jp);
+  }
+  return j;
+}
+
+class DetectCommand : public Command {
+ public:
+  std::string Name() const override { return "detect"; }
+  std::string Summary() const override {
+    return "Planes of one range image (depth PNG or organized PCD): labels, planes.json, PLY";
+  }
+  int Order() const override { return 10; }
+
+  void Setup(CLI::App& sub) override {
+    sub.add_option("input", input_, "16-bit depth PNG or organized .pcd (or KITTI .bin)")
+        ->required()
+        ->check(CLI::ExistingFile);
+    sub.add_option("-o,--out", out_, "output folder (created)")->required();
+    std::string methods;
+    for (const auto& m : DetectorMethods()) methods += (methods.empty() ? "" : "|") + m;
+    sub.add_option("-m,--method", method_, "detector " + methods + " (default: detection.method)")
+        ->check(CLI::IsMember(DetectorMethods()));
+    sub.add_option("--intrinsics", intrinsics_,
+                   "camera file for a depth PNG (width height fx fy cx cy depth_scale [flip_y]); "
+                   "default: the sensor section")
+        ->check(CLI::ExistingFile);
+    AddConfigOptions(sub, options_);
+    sub.footer(
+        "Examples:\n"
+        "  planeslam detect depth.png --intrinsics intrinsics.yaml --out det\n"
+        "  planeslam detect frame.png --config config/tum_fr3.yaml --config "
+        "config/detection_kinect.yaml --out det --method point\n"
+        "  planeslam detect scan000.pcd --config config/laser_scan.yaml --config "
+        "config/detection_laser.yaml --out det\n"
+        "Writes planes.json (n.p = d in the sensor frame, covariance of (n, d)), labels.png (16-bit "
+        "plane id, 0 = none),\nlabels_color.png, classes.png (grid methods: planar green, "
+        "spherical blue, linear red, sparse grey),\nsegmented.ply and config.yaml.");
+  }
+
+  int Run() override {
+    Config config = LoadConfig(options_);
+    auto& section = config.Get<DetectionSection>("detection");
+    if (!method_.empty()) section.method = method_;
+    if (MaybePrintConfig(options_, config)) return 0;
+    ds::SensorConfig sensor = config.Get<ds::SensorConfig>("sensor");
+    if (!intrinsics_.empty()) {
+      const ds::CameraFile camera = ds::ReadCameraFile(intrinsics_);
+      sensor.intrinsics = camera.intrinsics;
+      sensor.depth_scale = camera.depth_scale;
+      sensor.flip_y = false;  // the file's intrinsics already carry the flip (fy < 0)
+      sensor.intrinsics_source = "config";
+    }
+    const auto detector = MakeDetector(section.method, config);
+
+    const auto t0 = Clock::now();
+    const ds::Frame frame = ds::LoadSingleFrame(input_, sensor);
+    const auto t1 = Clock::now();
+    const detection::Segmentation seg = detector->Detect(frame.cloud);
+    const auto t2 = Clock::now();
+    const ds::OrganizedCloud& cloud = frame.cloud;
+
+    // Every output is built in memory first; only then are files written (each atomically).
+    std::size_t valid = 0, assigned = 0;
+    ds::Image16 labels(cloud.width, cloud.height);
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      if (!cloud.IsValid(i)) continue;
+      ++valid;
+      if (seg.labels[i] >= 1) {
+        ++assigned;
+        labels.data[i] = static_cast<std::uint16_t>(std::min(seg.labels[i], 65535));
+      }
+    }
+    const std::vector<std::uint8_t> grey = GreyRendering(cloud);
+    ds::ImageRgb8 colour(cloud.width, cloud.height);
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      std::uint8_t* px = &colour.data[3 * i];
+      px[0] = px[1] = px[2] = grey[i];
+      if (seg.labels[i] >= 1) {
+        std::uint8_t rgb[3];
+        PlaneColour(seg.labels[i], rgb);
+        for (int c = 0; c < 3; ++c) px[c] = static_cast<std::uint8_t>((3 * rgb[c] + grey[i]) / 4);
+      }
+    }
+    const bool have_classes = !seg.cell_classes.empty() && seg.cell_size > 0;
+    ds::ImageRgb8 classes(cloud.width, cloud.height);
+    if (have_classes) {
+      static const std::uint8_t kClassRgb[4][3] = {
+          {190, 190, 190}, {220, 30, 30}, {30, 190, 30}, {40, 70, 230}};  // sparse linear planar spherical
+      for (int y = 0; y < cloud.height; ++y) {
+        for (int x = 0; x < cloud.width; ++x) {
+          const auto cls = seg.cell_classes[static_cast<std::size_t>(y / seg.cell_size) *
+                                                seg.cells_x + x / seg.cell_size];
+          const std::uint8_t* rgb = kClassRgb[static_cast<int>(cls)];
+          std::memcpy(&classes.data[3 * (static_cast<std::size_t>(y) * cloud.width + x)], rgb, 3);
+        }
+      }
+    }
+    const double detect_ms = Ms(t1, t2);
+    const std::string json =
+        PlanesJson(input_, detector->Name(), cloud, seg, valid, assigned, detect_ms).dump(1) + "\n";
+    const std::string ply = PlyBytes(cloud, seg, grey);
+    const std::string config_yaml = config.ToYaml();
+
+    EnsureDirectory(out_);
+    const std::filesystem::path dir(out_);
+    ds::WriteFileAtomic((dir / "planes.json").string(), json);
+    ds::WritePng16((dir / "labels.png").string(), labels);
+    ds::WritePngRgb((dir / "labels_color.png").string(), colour);
+    if (have_classes) ds::WritePngRgb((dir / "classes.png").string(), classes);
+    ds::WriteFileAtomic((dir / "segmented.ply").string(), ply);
+    ds::WriteFileAtomic((dir / "config.yaml").string(), config_yaml);
+    const auto t3 = Clock::now();
+
+    if (!options_.quiet) {
+      char line[256];
+      std::printf("input      %s (%dx%d, %zu valid pixels)\n", input_.c_str(), cloud.width,
+                  cloud.height, valid);
+      std::printf("method     %s, threshold model %s\n", detector->Name().c_str(),
+                  section.threshold_model.c_str());
+      std::printf("planes     %zu, %.1f %% of valid pixels assigned\n", seg.planes.size(),
+                  valid ? 100.0 * assigned / valid : 0.0);
+      std::string stages;
+      for (const auto& [stage, ms] : seg.timings_ms) {
+        std::snprintf(line, sizeof(line), "%s%s %.2f", stages.empty() ? "" : ", ", stage.c_str(), ms);
+        stages += line;
+      }
+      std::printf("time       detect %.2f ms (%s), load %.1f ms, write %.1f ms\n", detect_ms,
+                  stages.c_str(), Ms(t0, t1), Ms(t2, t3));
+      const std::size_t shown = std::min<std::size_t>(seg.planes.size(), 10);
+      for (std::size_t i = 0; i < shown; ++i) {
+        const auto& p = seg.planes[i];
+        std::printf("  plane %2d  n = (%6.3f %6.3f %6.3f)  d = %6.3f m  %7lld px  rms %.1f mm\n",
+                    p.id, p.normal.x(), p.normal.y(), p.normal.z(), p.d,
+                    static_cast<long long>(p.point_count), 1000.0 * std::sqrt(p.mse));
+      }
+      if (seg.planes.size() > shown) std::printf("  ... %zu more in planes.json\n", seg.planes.size() - shown);
+      std::printf("output     %s (planes.json, labels.png, labels_color.png%s, segmented.ply)\n",
+                  out_.c_str(), have_classes ? ", classes.png" : "");
+    }
+    return 0;
+  }
+
+ private:
+  std::string input_;
+  std::string out_;
+  std::string method_;
+  std::string intrinsics_;
+  ConfigOptions options_;
+};
+
+PLANESLAM_REGISTER_COMMAND(DetectCommand);
+
+}  // namespace
+}  // namespace planeslam::app

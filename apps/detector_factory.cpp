@@ -1,0 +1,69 @@
+#include "detector_factory.hpp"
+
+#include "planeslam/datasets/errors.hpp"
+
+namespace planeslam::app {
+
+std::vector<std::string> DetectorMethods() {
+  return {"grid", "grid3", "grid4", "grid5", "grid-paper", "point", "point-exact", "point-paper"};
+}
+
+detection::DetectionParams DetectionParamsFrom(const Config& config) {
+  const auto& section = config.Get<DetectionSection>("detection");
+  detection::DetectionParams params = section.params;
+  if (!detection::ParseThresholdModel(section.threshold_model, params.model)) {
+    throw ConfigError("key 'detection.threshold_model': expected constant or depth, got '" +
+                      section.threshold_model + "'");
+  }
+  return params;
+}
+
+namespace {
+
+void ThrowIfInvalid(const std::string& method, std::vector<std::string> problems) {
+  if (problems.empty()) return;
+  std::string text = "detector '" + method + "': ";
+  for (std::size_t i = 0; i < problems.size(); ++i) text += (i ? "; " : "") + problems[i];
+  throw ConfigError(text);
+}
+
+}  // namespace
+
+std::unique_ptr<detection::PlaneDetector> MakeDetector(const std::string& method,
+                                                       const Config& config) {
+  detection::DetectionParams params = DetectionParamsFrom(config);
+  detection::GridParams grid = config.Get<detection::GridParams>("grid");
+  detection::PointParams point = config.Get<detection::PointParams>("point");
+  std::string name = method;
+  if (method == "grid" || method == "grid-paper" || method == "grid3" || method == "grid4" ||
+      method == "grid5") {
+    if (method.size() == 5 && method.back() >= '3' && method.back() <= '5') {
+      grid.cell_size = method.back() - '0';
+      grid.mu = 0;  // the automatic k^2 - k + 1 for the forced size
+    }
+    if (method == "grid") name = "grid" + std::to_string(grid.cell_size);
+    if (method == "grid-paper") {
+      params.refine_boundary = false;
+      params.merge_regions = false;
+    }
+    auto problems = params.Validate();
+    auto more = grid.Validate();
+    problems.insert(problems.end(), more.begin(), more.end());
+    ThrowIfInvalid(method, problems);
+    return std::make_unique<detection::GridRegionGrowing>(params, grid, name);
+  }
+  if (method == "point" || method == "point-exact" || method == "point-paper") {
+    if (method != "point") point.refit_interval = 1;
+    if (method == "point-paper") params.merge_regions = false;
+    auto problems = params.Validate();
+    auto more = point.Validate();
+    problems.insert(problems.end(), more.begin(), more.end());
+    ThrowIfInvalid(method, problems);
+    return std::make_unique<detection::PointRegionGrowing>(params, point, name);
+  }
+  std::string valid;
+  for (const auto& m : DetectorMethods()) valid += (valid.empty() ? "" : ", ") + m;
+  throw ConfigError("unknown detection method '" + method + "' (valid: " + valid + ")");
+}
+
+}  // namespace planeslam::app

@@ -1,0 +1,37 @@
+#pragma once
+/// Builds plane detectors by method name from the configuration (sections "detection", "grid",
+/// "point"; see config_sections_detection.cpp and config/detection_*.yaml).
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "config.hpp"
+#include "planeslam/detection/detection_config.hpp"
+#include "planeslam/detection/grid_region_growing.hpp"
+#include "planeslam/detection/plane_detector.hpp"
+#include "planeslam/detection/point_region_growing.hpp"
+
+namespace planeslam::app {
+
+/// YAML section "detection": the shared thresholds with the threshold model as a string.
+struct DetectionSection {
+  std::string method = "grid";           ///< default detector of `detect` and `run`
+  std::string threshold_model = "depth";  ///< constant (the paper) | depth (sensor noise model)
+  detection::DetectionParams params;     ///< params.model is set from threshold_model
+};
+
+/// Method names MakeDetector accepts, e.g. for --help and the benchmark:
+/// grid (config's grid.cell_size), grid3, grid4, grid5, grid-paper (the paper's GBRG alone: no
+/// refinement, no merging), point (adaptive refit), point-exact (refit on every point, the paper's
+/// incremental PBRG), point-paper (point-exact without merging).
+std::vector<std::string> DetectorMethods();
+
+/// The shared thresholds of `config` (section "detection") with the model resolved.
+detection::DetectionParams DetectionParamsFrom(const Config& config);
+
+/// A detector for `method` configured from `config`. Throws ConfigError naming the method and the
+/// valid ones when `method` is unknown, or the problem when the parameters are invalid.
+std::unique_ptr<detection::PlaneDetector> MakeDetector(const std::string& method,
+                                                       const Config& config);
+
+}  // namespace planeslam::app
