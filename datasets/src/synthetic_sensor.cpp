@@ -271,9 +271,9 @@ class CasterBase : public SyntheticSensor {
     hits.assign(rays_.size(), Hit{});
     for (std::size_t k = 0; k < local.size(); ++k) {
       const Primitive& p = local[k];
-      // Everything this primitive could show is beyond range: skip (|D| >= 1 for both sensors,
-      // so s <= range).
-      if (p.bs_center.norm() - p.bs_radius > max_s) continue;
+      // Everything this primitive could show is beyond range: skip. The range of a hit is
+      // s * |D| <= s * max_ray_norm_, so s > max_s whenever range > max_s * max_ray_norm_.
+      if (p.bs_center.norm() - p.bs_radius > max_s * max_ray_norm_) continue;
       const PixelBox box = Cull(p);
       if (FastLoop(p, static_cast<int>(k), box, hits)) continue;
       for (int r = box.r0; r <= box.r1; ++r) {
@@ -292,6 +292,7 @@ class CasterBase : public SyntheticSensor {
   int height_;
   std::vector<Vector3d> rays_;  // per pixel, sensor frame
   std::vector<double> ray_norm2_;
+  double max_ray_norm_ = 1.0;   // largest |D| over the pixels
 };
 
 /// Pinhole depth camera.
@@ -308,6 +309,7 @@ class PinholeCaster final : public CasterBase {
         ray_norm2_[i] = rays_[i].squaredNorm();
       }
     }
+    for (double n2 : ray_norm2_) max_ray_norm_ = std::max(max_ray_norm_, std::sqrt(n2));
     for (int c = 0; c < width_; ++c) xs_.push_back((c - K.cx) / K.fx);
     for (int r = 0; r < height_; ++r) ys_.push_back((r - K.cy) / K.fy);
   }

@@ -118,6 +118,28 @@ TEST(SyntheticSensor, SphericalMatchesBruteForceRubble) {
   CompareWithBruteForce(SceneKind::kRubble, "spherical");
 }
 
+// A primitive beyond max_depth in range can still lie within it in depth z (off-axis pixels):
+// the far-primitive cull must not drop it.
+TEST(SyntheticSensor, OffAxisObjectWithinDepthButBeyondRangeIsSeen) {
+  PinholeSimConfig config;
+  config.noise = false;
+  config.edge_dropout = false;
+  const PinholeIntrinsics& K = config.intrinsics;
+  const Eigen::Vector3d D((620 - K.cx) / K.fx, (460 - K.cy) / K.fy, 1.0);
+  SyntheticScene scene;
+  scene.spheres.push_back({9.0 * D.normalized(), 0.2});  // range 8.8..9.2 m, depth about 7.4 m
+  const auto sensor = MakePinholeSensor(scene, config);
+  const SyntheticRender render = sensor->Render(Pose::Identity(), 1);
+  const std::size_t i = 460u * K.width + 620u;
+  const RayHit ref = IntersectScene(scene, Eigen::Vector3d::Zero(), D.normalized());
+  ASSERT_TRUE(ref.hit);
+  const double z = ref.t / D.norm();
+  ASSERT_LT(z, config.max_depth);
+  ASSERT_GT(ref.t, config.max_depth);
+  EXPECT_NEAR(render.true_range[i], z, 1e-6 * z);
+  EXPECT_TRUE(OrganizedCloud::IsValid(render.cloud.points[i]));
+}
+
 /// Checks every labelled pixel against its plane: distance <= bound(z).
 template <class Bound>
 void CheckLabelsOnPlanes(const SyntheticSequence& seq, Bound bound, double min_labelled) {

@@ -61,7 +61,8 @@ struct SyntheticRender {
   OrganizedCloud cloud;  ///< measured points in the sensor frame [m], NaN = no return
   Image16 labels;        ///< plane id of each valid pixel; 0 = no return or curved surface
   /// Exact depth z (pinhole) or range (spherical) of the first surface hit before noise and
-  /// dropouts; NaN where the ray hits nothing [m].
+  /// dropouts; NaN where the ray hits nothing [m]. Primitives lying wholly beyond the maximum
+  /// range are not cast, so a value beyond the maximum range may belong to a farther surface.
   std::vector<float> true_range;
 };
 
