@@ -170,6 +170,18 @@ TEST(Alignment, Sim3ScaleOnlyAndOriginAsEvo) {
   EXPECT_LT(ComputeStatistics(ApeErrors(ref.poses, est_rigid, PoseRelation::kFull)).max, 1e-12);
 }
 
+TEST(Alignment, ApeScaleMultipliesEstimatePositionsFirst) {
+  // evaluate_ate.py --scale: an estimate at half scale is exact once multiplied by 2.
+  Trajectory ref = RandomWalk(30, 5), est = ref;
+  for (Pose& p : est.poses) p.translation() *= 0.5;
+  ApeOptions o;
+  o.scale = 2.0;
+  const ApeResult r = EvaluateApe(ref, est, o);
+  ASSERT_TRUE(r.ok);
+  EXPECT_EQ(r.stats.count, 30u);
+  EXPECT_LT(r.stats.max, 1e-12);
+}
+
 TEST(Alignment, NToAlignUsesOnlyTheFirstPairs) {
   const Trajectory ref = RandomWalk(40, 4);
   std::vector<Pose> est = ref.poses;
