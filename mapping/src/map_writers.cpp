@@ -144,12 +144,13 @@ Rgb8 PlaneColor(int id) {
   return {byte(r), byte(g), byte(b)};
 }
 
-std::vector<MapPlaneRecord> MakeMapRecords(const PlaneMap& map) {
+std::vector<MapPlaneRecord> MakeMapRecords(const PlaneMap& map, int min_observations,
+                                           double min_area) {
   std::vector<MapPlaneRecord> records;
-  const std::vector<MapPlaneOutline> outlines = map.Outlines();
-  for (std::size_t i = 0; i < map.planes().size(); ++i) {
-    const MapPlane& p = map.planes()[i];
-    const MapPlaneOutline& o = outlines[i];
+  for (const MapPlane& p : map.planes()) {
+    if (static_cast<int>(p.observations.size()) < min_observations) continue;
+    const MapPlaneOutline o = map.Outline(p);
+    if (min_area > 0 && (!o.polygon.valid || o.polygon.area < min_area)) continue;
     MapPlaneRecord r;
     r.id = p.id;
     r.normal = p.normal;

@@ -1,9 +1,10 @@
 #include "planeslam/mapping/occupancy_map.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <fstream>
-#include <map>
-#include <tuple>
+#include <unordered_map>
 
 #include "planeslam/datasets/atomic_file.hpp"
 #include "planeslam/datasets/errors.hpp"
@@ -27,21 +28,37 @@ std::vector<std::string> OccupancyMapConfig::Validate() const {
 std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>& points,
                                              double voxel) {
   PLANESLAM_CHECK(voxel > 0, "voxel must be > 0, got " << voxel);
-  std::map<std::tuple<std::int64_t, std::int64_t, std::int64_t>,
-           std::pair<Eigen::Vector3d, int>> cells;
+  // Voxel indices packed in 21 bits per axis (offset 2^20): +-2^20 voxels, e.g. +-52 km at 5 cm;
+  // points beyond are dropped (no range image reaches that far).
+  constexpr std::int64_t kHalf = std::int64_t{1} << 20;
+  std::unordered_map<std::uint64_t, std::pair<Eigen::Vector3d, int>> cells;
+  cells.reserve(points.size() / 4 + 16);
   for (const auto& p : points) {
     if (!p.allFinite()) continue;
-    const auto key = std::make_tuple(static_cast<std::int64_t>(std::floor(p.x() / voxel)),
-                                     static_cast<std::int64_t>(std::floor(p.y() / voxel)),
-                                     static_cast<std::int64_t>(std::floor(p.z() / voxel)));
+    std::uint64_t key = 0;
+    bool inside = true;
+    for (int a = 0; a < 3; ++a) {
+      const double idx = std::floor(p[a] / voxel);
+      if (!(idx >= -kHalf && idx < kHalf)) {
+        inside = false;
+        break;
+      }
+      key = (key << 21) | static_cast<std::uint64_t>(static_cast<std::int64_t>(idx) + kHalf);
+    }
+    if (!inside) continue;
     auto& c = cells[key];
     if (c.second == 0) c.first.setZero();
     c.first += p.cast<double>();
     ++c.second;
   }
+  std::vector<std::pair<std::uint64_t, Eigen::Vector3f>> sorted;
+  sorted.reserve(cells.size());
+  for (const auto& [key, c] : cells) sorted.emplace_back(key, (c.first / c.second).cast<float>());
+  std::sort(sorted.begin(), sorted.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
   std::vector<Eigen::Vector3f> out;
-  out.reserve(cells.size());
-  for (const auto& [key, c] : cells) out.push_back((c.first / c.second).cast<float>());
+  out.reserve(sorted.size());
+  for (const auto& kv : sorted) out.push_back(kv.second);
   return out;
 }
 

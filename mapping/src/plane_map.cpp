@@ -26,16 +26,49 @@ std::int64_t FloorIndex(double x, double cell) {
 }
 
 /// Mean point per cell of a grid on the plane (basis) of the points; deterministic order (by cell).
+/// Dense accumulation over the points' bounding box (a plane's box holds few cells: 4 x 3 m at 4 cm
+/// is 7500), hashing only when the box is huge; per point this is a projection and an add.
 std::vector<Eigen::Vector3f> GridSamples(const std::vector<Eigen::Vector3f>& points,
                                          const PlaneBasis& basis, double cell) {
-  std::unordered_map<std::int64_t, std::pair<Eigen::Vector3d, int>> cells;
+  std::vector<std::pair<std::int64_t, std::int64_t>> ij;
+  ij.reserve(points.size());
+  std::int64_t i0 = std::numeric_limits<std::int64_t>::max(), j0 = i0;
+  std::int64_t i1 = std::numeric_limits<std::int64_t>::min(), j1 = i1;
   for (const auto& pf : points) {
-    if (!pf.allFinite()) continue;
-    const Eigen::Vector3d p = pf.cast<double>();
-    const Eigen::Vector2d xy = basis.Project(p);
-    auto& c = cells[CellKey(FloorIndex(xy.x(), cell), FloorIndex(xy.y(), cell))];
+    if (!pf.allFinite()) {
+      ij.emplace_back(std::numeric_limits<std::int64_t>::min(), 0);
+      continue;
+    }
+    const Eigen::Vector2d xy = basis.Project(pf.cast<double>());
+    const std::int64_t i = FloorIndex(xy.x(), cell), j = FloorIndex(xy.y(), cell);
+    ij.emplace_back(i, j);
+    i0 = std::min(i0, i), i1 = std::max(i1, i), j0 = std::min(j0, j), j1 = std::max(j1, j);
+  }
+  std::vector<Eigen::Vector3f> samples;
+  if (i0 > i1) return samples;
+  const std::int64_t w = i1 - i0 + 1, h = j1 - j0 + 1;
+  constexpr std::int64_t kMaxDenseCells = 1 << 22;
+  if (w <= kMaxDenseCells / h) {
+    std::vector<Eigen::Vector3d> sum(static_cast<std::size_t>(w * h), Eigen::Vector3d::Zero());
+    std::vector<int> count(static_cast<std::size_t>(w * h), 0);
+    for (std::size_t k = 0; k < points.size(); ++k) {
+      if (ij[k].first == std::numeric_limits<std::int64_t>::min()) continue;
+      const auto c = static_cast<std::size_t>((ij[k].first - i0) * h + (ij[k].second - j0));
+      sum[c] += points[k].cast<double>();
+      ++count[c];
+    }
+    // Row-major over (i, j): the same order as sorting by CellKey for these non-negative offsets.
+    for (std::size_t c = 0; c < sum.size(); ++c) {
+      if (count[c] > 0) samples.push_back((sum[c] / count[c]).cast<float>());
+    }
+    return samples;
+  }
+  std::unordered_map<std::int64_t, std::pair<Eigen::Vector3d, int>> cells;
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    if (ij[k].first == std::numeric_limits<std::int64_t>::min()) continue;
+    auto& c = cells[CellKey(ij[k].first, ij[k].second)];
     if (c.second == 0) c.first.setZero();
-    c.first += p;
+    c.first += points[k].cast<double>();
     ++c.second;
   }
   std::vector<std::pair<std::int64_t, Eigen::Vector3f>> sorted;
@@ -43,7 +76,6 @@ std::vector<Eigen::Vector3f> GridSamples(const std::vector<Eigen::Vector3f>& poi
   for (const auto& [key, c] : cells) sorted.emplace_back(key, (c.first / c.second).cast<float>());
   std::sort(sorted.begin(), sorted.end(),
             [](const auto& a, const auto& b) { return a.first < b.first; });
-  std::vector<Eigen::Vector3f> samples;
   samples.reserve(sorted.size());
   for (const auto& kv : sorted) samples.push_back(kv.second);
   return samples;

@@ -50,8 +50,11 @@ struct MapPlaneRecord {
 /// A distinct, deterministic colour per plane id (golden-ratio hue steps, full saturation).
 Rgb8 PlaneColor(int id);
 
-/// Records of all planes of `map` with their outlines (PlaneMap::Outlines) and PlaneColor colours.
-std::vector<MapPlaneRecord> MakeMapRecords(const PlaneMap& map);
+/// Records of the planes of `map` with their outlines (PlaneMap::Outline) and PlaneColor colours,
+/// leaving out planes seen fewer than `min_observations` times or with an outline area below
+/// `min_area` [m^2] (single noisy detections of far surfaces clutter a map).
+std::vector<MapPlaneRecord> MakeMapRecords(const PlaneMap& map, int min_observations = 1,
+                                           double min_area = 0.0);
 
 enum class PlyFormat { kBinary, kAscii };
 
