@@ -117,4 +117,47 @@ FastFit FitSums(const MomentSums& m) {
   return f;
 }
 
+FastFit RefitFrom(const MomentSums& m, const Eigen::Vector3d& n0) {
+  if (m.k < 3) return FitSums(m);
+  double c[6];
+  m.Scatter(c);
+  // Adjugate of the symmetric C (cofactors), also symmetric.
+  const double a00 = c[3] * c[5] - c[4] * c[4], a01 = c[2] * c[4] - c[1] * c[5],
+               a02 = c[1] * c[4] - c[2] * c[3], a11 = c[0] * c[5] - c[2] * c[2],
+               a12 = c[1] * c[2] - c[0] * c[4], a22 = c[0] * c[3] - c[1] * c[1];
+  Eigen::Vector3d x = n0;
+  for (int it = 0; it < 2; ++it) {
+    const Eigen::Vector3d y(a00 * x.x() + a01 * x.y() + a02 * x.z(),
+                            a01 * x.x() + a11 * x.y() + a12 * x.z(),
+                            a02 * x.x() + a12 * x.y() + a22 * x.z());
+    const double norm2 = y.squaredNorm();
+    if (!(norm2 > 1e-300) || !std::isfinite(norm2)) return FitSums(m);
+    x = y / std::sqrt(norm2);
+  }
+  const double l1 = std::max(0.0, c[0] * x.x() * x.x() + c[3] * x.y() * x.y() +
+                                      c[5] * x.z() * x.z() +
+                                      2.0 * (c[1] * x.x() * x.y() + c[2] * x.x() * x.z() +
+                                             c[4] * x.y() * x.z()));
+  const double s = c[0] + c[3] + c[5] - l1;  // l2 + l3
+  const double e2 = a00 + a11 + a22;         // l1 l2 + l1 l3 + l2 l3
+  const double p = e2 - l1 * s;              // l2 l3
+  const double disc = std::sqrt(std::max(0.0, s * s - 4.0 * p));
+  const double l2 = 0.5 * (s - disc), l3 = 0.5 * (s + disc);
+  if (!(l1 <= 0.01 * l2)) return FitSums(m);
+  FastFit f;
+  f.centroid = m.Centroid();
+  double d = x.dot(f.centroid);
+  if (d < 0) {
+    x = -x;
+    d = -d;
+  }
+  f.normal = x;
+  f.d = d;
+  f.l1 = l1;
+  f.l2 = std::max(0.0, l2);
+  f.l3 = std::max(0.0, l3);
+  f.mse = l1 / m.k;
+  return f;
+}
+
 }  // namespace planeslam::detection

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <functional>
 #include <utility>
 #include <vector>
@@ -37,7 +38,7 @@ struct Workspace {
   std::vector<std::int32_t> queued;
   std::vector<int> queue;
   std::vector<int> members;
-  std::vector<std::pair<double, int>> heap;
+  std::vector<std::uint64_t> seeds;
   std::vector<MomentSums> regions;
   std::vector<FastFit> fits;
   std::vector<std::int32_t> labels;
@@ -118,7 +119,15 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   const double cos_eta = std::cos(eta);
   ws.classes.assign(num_cells, CellClass::kSparse);
   ws.info.resize(num_cells);
-  ws.heap.clear();
+  ws.seeds.clear();
+  // Seed key: the MSE as a float's bit pattern (monotonic for non-negative floats) above the grid
+  // index, so one sort of 64-bit keys gives the order a min-heap of (MSE, index) would pop.
+  auto seed_key = [](double mse, int c) {
+    const float f = static_cast<float>(std::max(mse, 0.0));
+    std::uint32_t bits;
+    std::memcpy(&bits, &f, 4);
+    return static_cast<std::uint64_t>(bits) << 32 | static_cast<std::uint32_t>(c);
+  };
   for (int c = 0; c < num_cells; ++c) {
     const MomentSums& s = ws.sums[c];
     if (s.k < mu) continue;  // sparse
@@ -156,17 +165,17 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       // through the grid's normal uncertainty, so that grids whose normal is mostly noise (far
       // away, where a fluke can give a tiny MSE with a random normal) seed last.
       const double tilt = std::min(1.0, s.NormalTilt(e.l2));
-      ws.heap.emplace_back(mse + s.IsotropicMse() * tilt * tilt, c);
+      ws.seeds.push_back(seed_key(mse + s.IsotropicMse() * tilt * tilt, c));
     } else {
       ci.angle_tol = eta;
       ci.cos_tol = cos_eta;
-      ws.heap.emplace_back(mse, c);  // Algorithm 2 line 4: minimal MSE first
+      ws.seeds.push_back(seed_key(mse, c));  // Algorithm 2 line 4: minimal MSE first
     }
   }
 
-  // ---- 3. Region growing (Algorithm 2): seeds from a min-heap of grid MSE, BFS over 4-neighbours.
+  // ---- 3. Region growing (Algorithm 2): seeds in order of grid MSE, BFS over 4-neighbours.
   const auto t2 = Clock::now();
-  std::make_heap(ws.heap.begin(), ws.heap.end(), std::greater<>());
+  std::sort(ws.seeds.begin(), ws.seeds.end());
   ws.cell_region.assign(num_cells, -1);
   ws.used.assign(num_cells, 0);
   ws.queued.assign(num_cells, -1);
@@ -175,10 +184,8 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       static_cast<std::size_t>((params_.theta + k * k - 1) / (k * k));
   const int dx[4] = {1, -1, 0, 0};
   const int dy[4] = {0, 0, 1, -1};
-  while (!ws.heap.empty()) {
-    std::pop_heap(ws.heap.begin(), ws.heap.end(), std::greater<>());
-    const int seed = ws.heap.back().second;
-    ws.heap.pop_back();
+  for (const std::uint64_t key : ws.seeds) {
+    const int seed = static_cast<int>(key & 0xffffffffu);
     if (ws.used[seed]) continue;  // already in R or R'
     const int r = static_cast<int>(ws.regions.size());
     MomentSums region = ws.sums[seed];
@@ -233,7 +240,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       if (off >= gamma) continue;
       MomentSums merged = region;
       merged.Merge(gs);
-      const FastFit merged_fit = FitSums(merged);
+      const FastFit merged_fit = RefitFrom(merged, fit.normal);
       const double expected =
           merged.EffectiveMse(merged_fit.normal, merged.NormalTilt(merged_fit.l2));
       if (merged_fit.mse >= params_.Epsilon(expected)) continue;

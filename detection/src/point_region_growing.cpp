@@ -193,13 +193,13 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
           if (MseAbout(merged, fit.normal) < eps) {
             accept = true;
           } else {
-            new_fit = FitSums(merged);
+            new_fit = RefitFrom(merged, fit.normal);
             refitted = true;
             accept = new_fit.mse < params_.Epsilon(merged.EffectiveMse(
                                        new_fit.normal, merged.NormalTilt(new_fit.l2)));
           }
         } else {
-          new_fit = FitSums(merged);
+          new_fit = RefitFrom(merged, fit.normal);
           refitted = true;
           const double dist = std::abs(new_fit.normal.dot(pc) - new_fit.d);
           accept = dist < gamma_for(new_fit, merged) &&
@@ -230,7 +230,7 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
           const double interval = refit_interval > 0 ? refit_interval
                                                      : std::max(1.0, region.k / 64.0);
           if (since_refit >= interval) {
-            fit = FitSums(region);
+            fit = RefitFrom(region, fit.normal);
             since_refit = 0;
           }
         }

@@ -107,9 +107,11 @@ TEST(FastMoments, EigenSolverMatchesEigen) {
 TEST(FastMoments, IncrementalFitEqualsBatchFit) {
   const auto pts = NoisyPlanePoints(400, 6, 0.005, Eigen::Vector3d(0.1, 0.9, 0.3), 1.2);
   MomentSums inc;
+  FastFit prev;
   for (std::size_t i = 0; i < pts.size(); ++i) {
     inc.Add(pts[i].x(), pts[i].y(), pts[i].z(), 0.0);
     if (i < 3) continue;
+    if (i == 3) prev = FitSums(inc);
     // Batch fit of the first i+1 points with Eigen's general solver.
     Eigen::Vector3d mean = Eigen::Vector3d::Zero();
     for (std::size_t j = 0; j <= i; ++j) mean += pts[j];
@@ -123,6 +125,14 @@ TEST(FastMoments, IncrementalFitEqualsBatchFit) {
     EXPECT_NEAR(f.normal.dot(n), 1.0, 1e-9) << i;
     EXPECT_NEAR(f.d, n.dot(mean), 1e-9) << i;
     EXPECT_NEAR(f.mse, es.eigenvalues()(0) / (i + 1), 1e-12) << i;
+    // The growers' per-join update from the previous normal gives the same plane.
+    const FastFit r = RefitFrom(inc, prev.normal);
+    EXPECT_NEAR(r.normal.dot(n), 1.0, 1e-9) << i;
+    EXPECT_NEAR(r.d, n.dot(mean), 1e-9) << i;
+    EXPECT_NEAR(r.mse, es.eigenvalues()(0) / (i + 1), 1e-12) << i;
+    EXPECT_NEAR(r.l2, es.eigenvalues()(1), 1e-9 * es.eigenvalues()(2)) << i;
+    EXPECT_NEAR(r.l3, es.eigenvalues()(2), 1e-9 * es.eigenvalues()(2)) << i;
+    prev = r;
   }
 }
 

@@ -6,8 +6,10 @@
 /// 2. Each grid is classified from its scatter eigenvalues l1 <= l2 <= l3: K < mu sparse,
 ///    l2 <= alpha l3 linear, l1 <= beta l2 planar, else spherical (Section III-A; with the depth
 ///    threshold model a grid whose residual is within the sensor noise is planar too).
-/// 3. Seeds are the unassigned planar grids in order of increasing MSE (a binary min-heap; ties by
-///    grid index, row-major). A region grows breadth-first over 4-neighbour grids (the grid image's
+/// 3. Seeds are the unassigned planar grids in order of increasing MSE (ties by grid index,
+///    row-major); the order is computed once by sorting (MSE, index) keys, which pops exactly what
+///    the paper's min-heap would, with less work. Under the depth threshold model the key adds
+///    the ray noise leaking through the grid's normal uncertainty (far noisy grids seed last). A region grows breadth-first over 4-neighbour grids (the grid image's
 ///    left/right/up/down). 4- rather than 8-neighbours: a diagonal grid touches the region in one
 ///    corner pixel only, so it adds no evidence of continuity, and 8-neighbours leak across thin
 ///    diagonal edges; every grid of a 4-connected plane is still reached. A candidate g joins when
