@@ -143,9 +143,9 @@ class DetectCommand : public Command {
   int Order() const override { return 10; }
 
   void Setup(CLI::App& sub) override {
+    // No CLI11 file checks: the readers throw IoError naming the file (one-line error, exit 2).
     sub.add_option("input", input_, "16-bit depth PNG or organized .pcd (or KITTI .bin)")
-        ->required()
-        ->check(CLI::ExistingFile);
+        ->required();
     sub.add_option("-o,--out", out_, "output folder (created)")->required();
     std::string methods;
     for (const auto& m : DetectorMethods()) methods += (methods.empty() ? "" : "|") + m;
@@ -153,8 +153,7 @@ class DetectCommand : public Command {
         ->check(CLI::IsMember(DetectorMethods()));
     sub.add_option("--intrinsics", intrinsics_,
                    "camera file for a depth PNG (width height fx fy cx cy depth_scale [flip_y]); "
-                   "default: the sensor section")
-        ->check(CLI::ExistingFile);
+                   "default: the sensor section");
     AddConfigOptions(sub, options_);
     sub.footer(
         "Examples:\n"
