@@ -109,7 +109,9 @@ struct PoseGraphConfig {
 struct PoseGraphResult {
   double initial_cost = 0.0;  ///< 0.5 sum rho(|r|^2) before, Ceres' convention
   double final_cost = 0.0;    ///< same, after
-  int iterations = 0;         ///< successful + unsuccessful LM steps (Ceres' "Minimizer iterations")
+  /// Ceres' "Minimizer iterations" (successful + unsuccessful steps, counting the initial
+  /// evaluation as one, so max_iterations = 5 can report 6).
+  int iterations = 0;
   bool converged = false;     ///< Ceres reported CONVERGENCE (a tolerance was met)
   bool usable = false;        ///< the poses were updated with a usable solution
   double time_seconds = 0.0;  ///< Ceres' total time
