@@ -100,16 +100,36 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     MomentSums* crow = ws.sums.data() + static_cast<std::size_t>(y / k) * cells_x;
     for (int cx = 0; cx < cells_x; ++cx) {
       const int x0 = cx * k, x1 = std::min(width, x0 + k);
-      MomentSums acc;
+      // K, S, Q only (10 sums); the noise moment W of the grid is set from its centre below.
+      double k_ = 0, sx = 0, sy = 0, sz = 0, xx = 0, xy = 0, xz = 0, yy = 0, yz = 0, zz = 0;
       for (int x = x0; x < x1; ++x) {
         const Eigen::Vector3f& p = row[x];
         if (!std::isfinite(p.z())) continue;
-        const double z = internal::PointDepth(p, spherical);
-        const double rel = (s0 + s2 * z * z) / z;  // sigma(z) / z: relative ray noise
-        acc.Add(p.x(), p.y(), p.z(), rel * rel);
+        const double px = p.x(), py = p.y(), pz = p.z();
+        k_ += 1.0;
+        sx += px; sy += py; sz += pz;
+        xx += px * px; xy += px * py; xz += px * pz;
+        yy += py * py; yz += py * pz; zz += pz * pz;
       }
-      if (acc.k > 0) crow[cx].Merge(acc);
+      if (k_ > 0) {
+        MomentSums& m = crow[cx];
+        m.k += k_;
+        m.sx += sx; m.sy += sy; m.sz += sz;
+        m.xx += xx; m.xy += xy; m.xz += xz;
+        m.yy += yy; m.yz += yz; m.zz += zz;
+      }
     }
+  }
+
+  // Noise moment of each grid: W = w(z) Q with w = (sigma(z)/z)^2 at the grid's centre (within a
+  // k x k grid z varies by ~1 %, so this equals the per-pixel sum to ~2 %; the refinement and the
+  // final planes use per-pixel weights).
+  for (MomentSums& m : ws.sums) {
+    if (m.k <= 0) continue;
+    const double z = spherical ? m.Centroid().norm() : m.sz / m.k;
+    const double w = z > 0 ? (s0 + s2 * z * z) * (s0 + s2 * z * z) / (z * z) : 0.0;
+    m.wxx = w * m.xx; m.wxy = w * m.xy; m.wxz = w * m.xz;
+    m.wyy = w * m.yy; m.wyz = w * m.yz; m.wzz = w * m.zz;
   }
 
   // ---- 2. Shape classification (Section III-A) and the planar grids' planes.
@@ -268,9 +288,13 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     const std::int32_t* creg = ws.cell_region.data() + static_cast<std::size_t>(y / k) * cells_x;
     std::int32_t* lrow = ws.labels.data() + static_cast<std::size_t>(y) * width;
     const Eigen::Vector3f* row = pts + static_cast<std::size_t>(y) * width;
-    for (int x = 0; x < width; ++x) {
-      const std::int32_t r = creg[x / k];
-      if (r >= 0 && std::isfinite(row[x].z())) lrow[x] = r;
+    for (int cx = 0; cx < cells_x; ++cx) {
+      const std::int32_t r = creg[cx];
+      if (r < 0) continue;
+      const int x1 = std::min(width, (cx + 1) * k);
+      for (int x = cx * k; x < x1; ++x) {
+        if (std::isfinite(row[x].z())) lrow[x] = r;
+      }
     }
   }
   if (params_.refine_boundary && !ws.regions.empty()) {
