@@ -243,6 +243,7 @@ class CasterBase : public SyntheticSensor {
       : prims_(Compile(scene)), width_(width), height_(height) {
     rays_.resize(static_cast<std::size_t>(width) * height);
     ray_norm2_.resize(rays_.size());
+    ray_norm_.resize(rays_.size());
   }
   int Width() const override { return width_; }
   int Height() const override { return height_; }
@@ -292,6 +293,7 @@ class CasterBase : public SyntheticSensor {
   int height_;
   std::vector<Vector3d> rays_;  // per pixel, sensor frame
   std::vector<double> ray_norm2_;
+  std::vector<double> ray_norm_;
   double max_ray_norm_ = 1.0;   // largest |D| over the pixels
 };
 
@@ -307,6 +309,7 @@ class PinholeCaster final : public CasterBase {
         const std::size_t i = static_cast<std::size_t>(r) * width_ + c;
         rays_[i] = Vector3d((c - K.cx) / K.fx, (r - K.cy) / K.fy, 1.0);
         ray_norm2_[i] = rays_[i].squaredNorm();
+        ray_norm_[i] = std::sqrt(ray_norm2_[i]);
       }
     }
     for (double n2 : ray_norm2_) max_ray_norm_ = std::max(max_ray_norm_, std::sqrt(n2));
@@ -355,32 +358,42 @@ class PinholeCaster final : public CasterBase {
     out.cloud = OrganizedCloud(width_, height_, SensorModel::kPinhole);
     out.labels = Image16(width_, height_);
     out.true_range.assign(hits.size(), std::numeric_limits<float>::quiet_NaN());
-    for (std::size_t i = 0; i < hits.size(); ++i) {
-      if (hits[i].prim >= 0) out.true_range[i] = static_cast<float>(hits[i].s);
-    }
-    // Validity from the exact geometry: range, incidence, depth edges.
+    // Validity from the exact geometry: range, incidence (|n.D| >= cos_max |D|), depth edges.
     const double cos_max = std::cos(config_.max_incidence_deg * kDeg);
-    std::vector<char> valid(hits.size(), 0);
+    thread_local std::vector<char> valid;
+    valid.assign(hits.size(), 0);
     for (std::size_t i = 0; i < hits.size(); ++i) {
       const Hit& h = hits[i];
-      if (h.prim < 0 || h.s < config_.min_depth || h.s > config_.max_depth) continue;
+      if (h.prim < 0) continue;
+      out.true_range[i] = static_cast<float>(h.s);
+      if (h.s < config_.min_depth || h.s > config_.max_depth) continue;
       const Vector3d& D = rays_[i];
-      const Vector3d n = NormalAt(local[static_cast<std::size_t>(h.prim)], h.s * D);
-      if (std::abs(n.dot(D)) < cos_max * std::sqrt(ray_norm2_[i])) continue;
-      valid[i] = 1;
+      const Primitive& p = local[static_cast<std::size_t>(h.prim)];
+      const double cos_d = p.kind == Kind::kPolygon || p.kind == Kind::kDisk
+                               ? std::abs(p.n.dot(D))
+                               : std::abs(NormalAt(p, h.s * D).dot(D));
+      valid[i] = cos_d >= cos_max * ray_norm_[i];
     }
     if (config_.edge_dropout) {
-      std::vector<char> edge(hits.size(), 0);
-      auto mark = [&](std::size_t a, std::size_t b) {
-        if (hits[a].prim < 0 || hits[b].prim < 0) return;
-        const double za = hits[a].s, zb = hits[b].s;
-        if (std::abs(za - zb) > config_.edge_jump * std::min(za, zb)) edge[a] = edge[b] = 1;
-      };
+      // A pixel is dropped when its depth differs from a 4-neighbour's (both hit) by more than
+      // edge_jump times the smaller one; both sides of the jump go.
+      thread_local std::vector<char> edge;
+      edge.assign(hits.size(), 0);
+      const double jump = config_.edge_jump;
       for (int r = 0; r < height_; ++r) {
+        const std::size_t row = static_cast<std::size_t>(r) * width_;
         for (int c = 0; c < width_; ++c) {
-          const std::size_t i = static_cast<std::size_t>(r) * width_ + c;
-          if (c + 1 < width_) mark(i, i + 1);
-          if (r + 1 < height_) mark(i, i + width_);
+          const std::size_t i = row + c;
+          if (hits[i].prim < 0) continue;
+          const double za = hits[i].s;
+          if (c + 1 < width_ && hits[i + 1].prim >= 0) {
+            const double zb = hits[i + 1].s;
+            if (std::abs(za - zb) > jump * std::min(za, zb)) edge[i] = edge[i + 1] = 1;
+          }
+          if (r + 1 < height_ && hits[i + width_].prim >= 0) {
+            const double zb = hits[i + width_].s;
+            if (std::abs(za - zb) > jump * std::min(za, zb)) edge[i] = edge[i + width_] = 1;
+          }
         }
       }
       for (std::size_t i = 0; i < hits.size(); ++i) valid[i] = valid[i] && !edge[i];
@@ -469,6 +482,7 @@ class SphericalCaster final : public CasterBase {
         rays_[i] = Vector3d(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az),
                             std::sin(el));
         ray_norm2_[i] = 1.0;
+        ray_norm_[i] = 1.0;
       }
     }
   }
