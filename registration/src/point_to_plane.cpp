@@ -258,6 +258,18 @@ bool FillDegenerateWithPointToPlane(const datasets::OrganizedCloud& prev,
                             config);
     if (!icp.valid || determined(icp, Dk).size() != keep.size()) return false;
   }
+  // A correction the prior finds implausible (beyond its 99.9% region) is more likely a wrong
+  // convergence (few facing points, a repetitive structure) than the motion: keep the prior.
+  {
+    const Vector6d change = BoxMinus(icp.T_prev_curr, T_planes);
+    const Eigen::VectorXd y = Dk.transpose() * change;
+    const Eigen::MatrixXd prior_y = Dk.transpose() * result->covariance * Dk;
+    const double m2 = y.dot(prior_y.ldlt().solve(y));
+    // chi^2(m) 99.9% quantile by Wilson-Hilferty: m (1 - 2/(9m) + 3.09 sqrt(2/(9m)))^3.
+    const double m = static_cast<double>(y.size());
+    const double q = m * std::pow(1.0 - 2.0 / (9.0 * m) + 3.09 * std::sqrt(2.0 / (9.0 * m)), 3);
+    if (!(m2 <= q)) return false;
+  }
   // Covariance: unchanged outside span(Dk) (the directions are orthonormal), the alignment's
   // posterior inside.
   const Matrix6d P = Dk * Dk.transpose();

@@ -112,6 +112,24 @@ TEST(PointToPlane, RecoversTheCorridorAxisFromCrossStructure) {
   EXPECT_TRUE(r.covariance.allFinite());
 }
 
+TEST(PointToPlane, ACorrectionThePriorRulesOutIsRefused) {
+  // Same corridor, but the prior claims 2 cm certainty along the axis while being 12 cm off: the
+  // points' answer lies 6 sigma away, which is treated as a wrong convergence.
+  std::mt19937 rng(42);
+  CorridorCase c = MakeCase(/*with_features=*/true, /*prior_error=*/-0.12, rng);
+  c.prior.covariance.topLeftCorner<3, 3>() = Eigen::Matrix3d::Identity() * 0.02 * 0.02;
+  RegistrationResult r = RegisterPlanes(c.prev_planes, c.curr_planes, IdentityMatches(4), c.prior);
+  const RegistrationResult before = r;
+  const auto k = EstimatePinholeIntrinsics(c.prev_cloud);
+  ASSERT_TRUE(k.has_value());
+  PointToPlaneConfig config;
+  config.pixel_stride = 1;
+  EXPECT_FALSE(FillDegenerateWithPointToPlane(c.prev_cloud, *k, c.curr_cloud, config, &r));
+  EXPECT_TRUE(r.used_prior);
+  EXPECT_FALSE(r.used_icp);
+  EXPECT_TRUE(r.T_prev_curr.isApprox(before.T_prev_curr));
+}
+
 TEST(PointToPlane, BareCorridorKeepsThePriorAndSaysSo) {
   std::mt19937 rng(43);
   const CorridorCase c = MakeCase(/*with_features=*/false, /*prior_error=*/0.08, rng);

@@ -77,7 +77,9 @@ PointToPlaneResult AlignPointToPlane(const datasets::OrganizedCloud& prev,
 /// Runs AlignPointToPlane along result->degenerate_directions (prior: the result's covariance
 /// there) and, when the clouds pin at least one of them down (see the config's sigmas), takes
 /// the aligned pose, replaces the covariance along those directions and sets used_icp; used_prior
-/// stays set when some direction is still undetermined by either. `degenerate` and
+/// stays set when some direction is still undetermined by either. A correction outside the
+/// prior's 99.9% region (chi-square on the directions used) is refused as a wrong convergence and
+/// the prior kept (returns false). `degenerate` and
 /// `degenerate_directions` keep describing the planes. Returns whether ICP was used.
 bool FillDegenerateWithPointToPlane(const datasets::OrganizedCloud& prev,
                                     const datasets::PinholeIntrinsics& prev_intrinsics,
