@@ -372,11 +372,27 @@ OrganizedCloud ParsePcd(const std::string& bytes, const std::string& name, doubl
       throw IoError(name, "truncated: compressed block of " + std::to_string(compressed) +
                               " bytes, only " + std::to_string(available - 8) + " present");
     }
+    // LZF expands at most 88x (a 3-byte reference yields up to 264 bytes): a larger claim cannot be
+    // true, and refusing it keeps the allocation tied to the bytes actually present.
+    if (uncompressed > 88ull * compressed + 64) {
+      throw IoError(name, "compressed block of " + std::to_string(compressed) +
+                              " bytes cannot expand to the " + std::to_string(uncompressed) +
+                              " bytes the header needs");
+    }
     if (available - 8 - compressed > kMaxCompressedPadding) {
       throw IoError(name, std::to_string(available - 8 - compressed) +
                               " bytes after the compressed block (size words disagree with the file)");
     }
     decompressed = LzfDecompress(data + 8, compressed, expected, name);
+  } else {
+    // ascii: every point needs at least one character and one separator per value.
+    std::size_t elements = 0;
+    for (const auto& f : h.fields) elements += f.count;
+    if (available + 1 < n * elements * 2) {
+      throw IoError(name, "truncated: " + std::to_string(available) +
+                              " bytes of ascii data cannot hold the " + std::to_string(n) +
+                              " points the header announces");
+    }
   }
 
   OrganizedCloud cloud(static_cast<int>(h.width), static_cast<int>(h.height), model);

@@ -253,10 +253,12 @@ TEST(PcdIo, LyingHeadersAreIoErrorsNamingTheFile) {
   // Ascii with too few / too many points or values.
   const std::string h2 = Header("x y z", "4 4 4", "F F F", "1 1 1", 1, 2, 2, "ascii");
   EXPECT_EQ(ErrorOf([&] { ParsePcd(h2 + "1 2 3\n", "f.pcd"); }),
+            "f.pcd: truncated: 6 bytes of ascii data cannot hold the 2 points the header announces");
+  EXPECT_EQ(ErrorOf([&] { ParsePcd(h2 + "1.5 2.5 3.5\n", "f.pcd"); }),
             "f.pcd: truncated: header announces 2 points, ascii data has 1");
   EXPECT_EQ(ErrorOf([&] { ParsePcd(h2 + "1 2 3\n1 2 3\n1 2 3\n", "f.pcd"); }),
             "f.pcd: more ascii data than the 2 points the header announces");
-  EXPECT_EQ(ErrorOf([&] { ParsePcd(h2 + "1 2 3\n1 2\n", "f.pcd"); }),
+  EXPECT_EQ(ErrorOf([&] { ParsePcd(h2 + "1 2 3\n1.5 2.5\n", "f.pcd"); }),
             "f.pcd: ascii point 1 has 2 values, the header announces 3");
   EXPECT_EQ(ErrorOf([&] { ParsePcd(h2 + "1 2 3\n1 2 x\n", "f.pcd"); }),
             "f.pcd: ascii point 1: not a number 'x'");
@@ -271,6 +273,20 @@ TEST(PcdIo, HugeHeaderIsRefusedBeforeAllocating) {
   const std::string flat = Header("x y z", "4 4 4", "F F F", "1 1 1", 1000000000, 1000,
                                   1000000000000L, "binary");
   EXPECT_TRUE(Contains(ErrorOf([&] { ParsePcd(flat, "huge.pcd"); }), "exceeds the input limits"));
+  // Within the limits but far beyond the data: refused before the cloud is allocated.
+  const std::string big_ascii = Header("x y z", "4 4 4", "F F F", "1 1 1", 8000, 8000, 64000000,
+                                       "ascii") + "1 2 3\n";
+  EXPECT_EQ(ErrorOf([&] { ParsePcd(big_ascii, "big.pcd"); }),
+            "big.pcd: truncated: 6 bytes of ascii data cannot hold the 64000000 points the header "
+            "announces");
+  std::string words;
+  Append<std::uint32_t>(&words, 10);
+  Append<std::uint32_t>(&words, 4000u * 4000u * 12u);
+  const std::string big_lzf = Header("x y z", "4 4 4", "F F F", "1 1 1", 4000, 4000, 16000000,
+                                     "binary_compressed") + words + std::string(10, '\0');
+  EXPECT_EQ(ErrorOf([&] { ParsePcd(big_lzf, "big.pcd"); }),
+            "big.pcd: compressed block of 10 bytes cannot expand to the 192000000 bytes the header "
+            "needs");
   const std::string line = Header("x y z", "4 4 4", "F F F", "1 1 1", 2000000000, 1, 2000000000,
                                   "binary");
   EXPECT_TRUE(Contains(ErrorOf([&] { ParsePcd(line, "huge.pcd"); }), "exceeds the input limits"));
