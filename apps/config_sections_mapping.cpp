@@ -51,6 +51,10 @@ void VisitPlaneMap(FieldVisitor& v, mapping::PlaneMapConfig& c) {
   v.Field("max_offset", c.max_offset,
           "[m] largest distance of an observed plane's centroid from a map plane to associate", 0.0,
           100.0);
+  v.Field("max_offset_range_coeff", c.max_offset_range_coeff,
+          "[1/m] the offset gate grows by this times the squared range of the observed plane's "
+          "centroid (depth noise; 0.0043 = 3 sigma of the Kinect model 1.425e-3 z^2)",
+          0.0, 1.0);
   v.Field("max_gap", c.max_gap,
           "[m] largest gap between an observed plane's extent and a map plane's (spatial overlap "
           "test: coplanar surfaces farther apart stay separate planes)",
@@ -71,6 +75,10 @@ void VisitPlaneMap(FieldVisitor& v, mapping::PlaneMapConfig& c) {
   v.Field("max_samples_per_observation", c.max_samples_per_observation,
           "[samples] memory bound per observation: the sample cell doubles until below this", 16,
           100000000);
+  v.Field("sample_pixel_stride", c.sample_pixel_stride,
+          "[px] every n-th row and column of depth-camera frames feeds the samples (LiDAR range "
+          "images: always every pixel)",
+          1, 64);
   v.Field("polygon_cell_size", c.polygon.cell_size,
           "[m] grid cell of the outline (concave hull); 0 = automatic from the sample density", 0.0,
           100.0);

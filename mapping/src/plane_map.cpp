@@ -148,6 +148,7 @@ std::vector<std::string> PlaneMapConfig::Validate() const {
   need(max_normal_angle_deg > 0 && max_normal_angle_deg < 90,
        "max_normal_angle_deg must be in (0, 90)");
   need(max_offset > 0, "max_offset must be > 0");
+  need(max_offset_range_coeff >= 0, "max_offset_range_coeff must be >= 0");
   need(max_gap >= 0, "max_gap must be >= 0");
   need(min_touch_points >= 1, "min_touch_points must be >= 1");
   need(merge_max_normal_angle_deg > 0 && merge_max_normal_angle_deg < 90,
@@ -156,6 +157,7 @@ std::vector<std::string> PlaneMapConfig::Validate() const {
   need(min_observation_points >= 3, "min_observation_points must be >= 3");
   need(sample_cell_size > 0, "sample_cell_size must be > 0");
   need(max_samples_per_observation >= 16, "max_samples_per_observation must be >= 16");
+  need(sample_pixel_stride >= 1, "sample_pixel_stride must be >= 1");
   for (const auto& p : polygon.Validate()) problems.push_back("polygon: " + p);
   return problems;
 }
@@ -401,6 +403,8 @@ FrameAssociation PlaneMap::AddObservations(
     samples.reserve(obs.samples_sensor.size());
     for (const auto& s : obs.samples_sensor) samples.push_back(T * s.cast<double>());
 
+    const double range2 = obs.stats_sensor.centroid.squaredNorm();
+    const double offset_gate = config_.max_offset + config_.max_offset_range_coeff * range2;
     // Candidates, best (smallest offset) first.
     std::vector<std::pair<double, int>> candidates;
     const int need = std::min<int>(config_.min_touch_points, static_cast<int>(samples.size()));
@@ -408,7 +412,7 @@ FrameAssociation PlaneMap::AddObservations(
       const MapPlane& m = planes_[i];
       if (m.normal.dot(fit.normal) < cos_assoc) continue;
       const double offset = std::abs(m.normal.dot(fit.centroid) - m.d);
-      if (offset > config_.max_offset) continue;
+      if (offset > offset_gate) continue;
       if (need == 0 || CountTouching(extents_[i], samples, need) < need) continue;
       candidates.emplace_back(offset, m.id);
     }
@@ -501,11 +505,16 @@ FrameAssociation PlaneMap::AddFrame(std::int64_t keyframe_id, const Pose& T_worl
     index_of_id[segmentation.planes[i].id] = i;
   }
   std::vector<std::vector<Eigen::Vector3f>> points(segmentation.planes.size());
-  for (std::size_t p = 0; p < cloud.size(); ++p) {
-    const int label = segmentation.labels[p];
-    if (label < 1 || !cloud.IsValid(p)) continue;
-    const auto it = index_of_id.find(label);
-    if (it != index_of_id.end()) points[it->second].push_back(cloud.points[p]);
+  const int stride =
+      cloud.model == datasets::SensorModel::kPinhole ? config_.sample_pixel_stride : 1;
+  for (int row = 0; row < cloud.height; row += stride) {
+    for (int col = 0; col < cloud.width; col += stride) {
+      const std::size_t p = static_cast<std::size_t>(row) * cloud.width + col;
+      const int label = segmentation.labels[p];
+      if (label < 1 || !cloud.IsValid(p)) continue;
+      const auto it = index_of_id.find(label);
+      if (it != index_of_id.end()) points[it->second].push_back(cloud.points[p]);
+    }
   }
   return AddObservations(keyframe_id, T_world_sensor, segmentation.planes, points);
 }

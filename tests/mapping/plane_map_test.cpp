@@ -428,7 +428,9 @@ TEST(PlaneMap, AddFrameTakesPointsFromTheLabelImage) {
     }
   }
   seg.planes = {MakePlane(1, pts[0]), MakePlane(2, pts[1])};
-  PlaneMap map;
+  PlaneMapConfig config;
+  config.sample_pixel_stride = 1;  // every pixel (the test's 2 cm spacing against 4 cm cells)
+  PlaneMap map(config);
   const FrameAssociation a = map.AddFrame(0, Pose::Identity(), seg, cloud);
   EXPECT_EQ(a.created, 2);
   ASSERT_EQ(map.size(), 2u);

@@ -11,7 +11,8 @@
 /// plane (n, d, extent) requires, all three:
 ///   - angle(n_o, n) < max_normal_angle_deg (oriented: both normals point away from the sensors that
 ///     saw them, so a wall's two faces stay apart);
-///   - |n . c_o - d| < max_offset (the observation's mass centre lies near the map plane);
+///   - |n . c_o - d| < max_offset + max_offset_range_coeff r^2 (the observation's mass centre lies
+///     near the map plane; r its range from the sensor, for the depth noise);
 ///   - at least min_touch_points of the observation's samples lie within max_gap of the map plane's
 ///     occupied cells (spatial overlap or adjacency; two coplanar tables far apart stay apart).
 /// An observation that matches several map planes proves them to be one surface: they are merged.
@@ -61,6 +62,10 @@ struct PointStats {
 struct PlaneMapConfig {
   double max_normal_angle_deg = 10.0;  ///< [deg] observation vs map plane normals
   double max_offset = 0.10;            ///< [m] observation centroid to map plane distance
+  /// [1/m] the offset gate grows by this times r^2, r = range of the observation's centroid from its
+  /// sensor: depth noise grows quadratically (Kinect sigma(z) = 1.425e-3 z^2, Khoshelham & Elberink
+  /// 2012; 3 sigma = 0.0043 z^2), and far detections are biased by it. 0 = constant gate.
+  double max_offset_range_coeff = 0.0043;
   double max_gap = 0.30;   ///< [m] largest gap between an observation and a map plane's extent
   int min_touch_points = 3;  ///< [samples] within max_gap for the extents to count as touching
   double merge_max_normal_angle_deg = 5.0;  ///< [deg] between two map planes to merge them
@@ -68,6 +73,10 @@ struct PlaneMapConfig {
   int min_observation_points = 50;  ///< [points] smaller detected planes are not added to the map
   double sample_cell_size = 0.04;   ///< [m] grid cell of the per-observation samples
   int max_samples_per_observation = 3000;  ///< [samples] the cell doubles until below this
+  /// [px] AddFrame samples every n-th row and column of depth-camera (pinhole) clouds: at 640 px
+  /// and 58 deg a pixel spans 1.6 mm per metre of range, so n = 2 still puts several points in every
+  /// 4 cm sample cell up to ~10 m. Spherical (LiDAR) range images always use every pixel.
+  int sample_pixel_stride = 2;
   PolygonConfig polygon{0.08, 6.0, 0.0, 4000000};  ///< outline of each map plane (ConcaveHull)
 
   /// Problems with the values (empty when valid).
@@ -133,7 +142,8 @@ class PlaneMap {
   FrameAssociation AddObservations(std::int64_t keyframe_id, const Pose& T_world_sensor,
                                    const std::vector<detection::Plane>& planes,
                                    const std::vector<std::vector<Eigen::Vector3f>>& plane_points);
-  /// Same, taking each plane's points from the segmentation's label image over `cloud`.
+  /// Same, taking each plane's points from the segmentation's label image over `cloud` (every
+  /// sample_pixel_stride-th row and column for pinhole clouds; the moments come from the planes).
   FrameAssociation AddFrame(std::int64_t keyframe_id, const Pose& T_world_sensor,
                             const detection::Segmentation& segmentation,
                             const datasets::OrganizedCloud& cloud);
