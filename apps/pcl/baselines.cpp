@@ -2,6 +2,7 @@
 // segmentation/registration headers (they take long to compile).
 #include "pcl/baselines.hpp"
 
+#include <pcl/console/print.h>
 #include <pcl/features/integral_image_normal.h>
 #include <pcl/filters/voxel_grid.h>
 #include <pcl/point_cloud.h>
@@ -76,6 +77,8 @@ OmpsDetector::OmpsDetector(OmpsConfig config) : config_(std::move(config)) {
                       config_.normal_method == "average_3d_gradient",
                   "unknown normal method " << config_.normal_method);
   PLANESLAM_CHECK(config_.min_inliers >= 3, "min_inliers " << config_.min_inliers);
+  // PCL prints a warning per call on non-projective (spherical) grids; errors are still shown.
+  pcl::console::setVerbosityLevel(pcl::console::L_ERROR);
 }
 
 detection::Segmentation OmpsDetector::Detect(const datasets::OrganizedCloud& cloud) const {
