@@ -1,9 +1,8 @@
 // `planeslam graph optimize IN.g2o`: optimises a 3D pose graph file with the pose graph back-end
 // of `planeslam run` and writes the result as g2o.
-#include <nlohmann/json.hpp>
-
 #include <cstdio>
 #include <iostream>
+#include <nlohmann/json.hpp>
 #include <string>
 
 #include "cli_common.hpp"
@@ -38,12 +37,11 @@ class GraphCommand : public Command {
         ->type_name("IN.g2o");
     optimize_->add_option("-o,--out", out_, "write the optimised graph here (g2o, atomic)")
         ->type_name("OUT.g2o");
-    max_iterations_opt_ =
-        optimize_
-            ->add_option("--max-iterations", max_iterations_,
-                         "Levenberg-Marquardt iterations at most (default: "
-                         "pose_graph.max_iterations, 200)")
-            ->check(CLI::Range(0, 100000));
+    max_iterations_opt_ = optimize_
+                              ->add_option("--max-iterations", max_iterations_,
+                                           "Levenberg-Marquardt iterations at most (default: "
+                                           "pose_graph.max_iterations, 200)")
+                              ->check(CLI::Range(0, 100000));
     optimize_->add_option("--json", json_, "also write the figures as JSON to this file")
         ->type_name("FILE");
     optimize_->add_flag(
@@ -73,7 +71,8 @@ class GraphCommand : public Command {
 
     mapping::PoseGraph graph = mapping::ReadG2o(input_);
     if (raw_information_) {
-      for (auto& edge : graph.edges()) edge.information = mapping::InformationToG2o(edge.information);
+      for (auto& edge : graph.edges())
+        edge.information = mapping::InformationToG2o(edge.information);
     }
     const mapping::PoseGraphResult r = mapping::OptimizePoseGraph(graph, pg);
     if (raw_information_) {
@@ -86,15 +85,14 @@ class GraphCommand : public Command {
     const std::size_t loops = graph.NumLoopClosures();
     std::cout << "input           " << input_ << "\n"
               << "vertices        " << r.num_nodes << " (" << r.num_fixed << " fixed)\n"
-              << "edges           " << r.num_edges << " (" << r.num_edges - loops
-              << " odometry, " << loops << " loop closures, loss " << pg.loop_closure_loss
-              << ")\n"
+              << "edges           " << r.num_edges << " (" << r.num_edges - loops << " odometry, "
+              << loops << " loop closures, loss " << pg.loop_closure_loss << ")\n"
               << "initial cost    " << Number("%.6e", r.initial_cost) << "\n"
               << "final cost      " << Number("%.6e", r.final_cost) << "\n"
               << "iterations      " << r.iterations << "\n"
               << "time            " << Number("%.3f", r.time_seconds) << " s\n"
-              << "converged       " << (r.converged ? "yes" : "no") << " (" << r.termination
-              << ": " << r.message << ")\n";
+              << "converged       " << (r.converged ? "yes" : "no") << " (" << r.termination << ": "
+              << r.message << ")\n";
 
     if (!json_.empty()) {
       nlohmann::json j;

@@ -49,7 +49,8 @@ class LineParser {
     errno = 0;
     char* end = nullptr;
     const long long v = std::strtoll(t.c_str(), &end, 10);
-    if (t.empty() || *end != '\0' || errno == ERANGE) Fail("expected an integer id, got '" + t + "'");
+    if (t.empty() || *end != '\0' || errno == ERANGE)
+      Fail("expected an integer id, got '" + t + "'");
     return static_cast<std::int64_t>(v);
   }
 

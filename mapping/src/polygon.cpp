@@ -48,7 +48,9 @@ PlaneBasis MakePlaneBasis(const Eigen::Vector3d& normal, double d) {
 
 namespace {
 
-double Cross(const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x() * b.y() - a.y() * b.x(); }
+double Cross(const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+  return a.x() * b.y() - a.y() * b.x();
+}
 
 /// > 0 when a, b, c turn counter-clockwise.
 double Orient(const Eigen::Vector2d& a, const Eigen::Vector2d& b, const Eigen::Vector2d& c) {
@@ -128,8 +130,8 @@ double DistanceToSegment(const Eigen::Vector2d& p, const Eigen::Vector2d& a,
 }
 
 /// Marks the vertices kept on the open chain first..last (indices modulo n, last after first).
-void SimplifyChain(const std::vector<Eigen::Vector2d>& polygon, std::size_t first,
-                   std::size_t last, double tolerance, std::vector<char>& keep) {
+void SimplifyChain(const std::vector<Eigen::Vector2d>& polygon, std::size_t first, std::size_t last,
+                   double tolerance, std::vector<char>& keep) {
   const std::size_t n = polygon.size();
   std::vector<std::pair<std::size_t, std::size_t>> stack{{first, last}};  // unwrapped indices
   while (!stack.empty()) {
@@ -205,7 +207,8 @@ std::vector<Eigen::Vector2d> SimplifyClosedPolygon(const std::vector<Eigen::Vect
 
 std::vector<std::string> PolygonConfig::Validate() const {
   std::vector<std::string> problems;
-  if (!(cell_size >= 0.0) || !std::isfinite(cell_size)) problems.push_back("cell_size must be >= 0");
+  if (!(cell_size >= 0.0) || !std::isfinite(cell_size))
+    problems.push_back("cell_size must be >= 0");
   if (!(target_points_per_cell >= 1.0) || !std::isfinite(target_points_per_cell)) {
     problems.push_back("target_points_per_cell must be >= 1");
   }
@@ -227,7 +230,7 @@ struct Bounds {
 };
 
 struct Grid {
-  double cell = 0.0;    ///< nominal cell [m]
+  double cell = 0.0;     ///< nominal cell [m]
   Eigen::Vector2d size;  ///< cell width and height [m], within a few percent of `cell`
   Eigen::Vector2d min;   ///< corner of cell (0, 0)
   std::int64_t width = 0;
@@ -249,8 +252,8 @@ Grid MakeGrid(const Bounds& bounds, double cell, std::int64_t max_cells) {
       const auto n = std::max<std::int64_t>(
           1, static_cast<std::int64_t>(std::llround(extent[axis] / cell + 2.0 / 3.0)));
       counts[axis] = n;
-      grid.size[axis] = extent[axis] > 0.0 ? extent[axis] / (static_cast<double>(n) - 2.0 / 3.0)
-                                           : cell;
+      grid.size[axis] =
+          extent[axis] > 0.0 ? extent[axis] / (static_cast<double>(n) - 2.0 / 3.0) : cell;
       grid.min[axis] = bounds.min[axis] - grid.size[axis] / 3.0;
     }
     grid.width = counts[0];
@@ -521,8 +524,8 @@ std::vector<std::array<int, 3>> TriangulatePolygon(const std::vector<Eigen::Vect
         int start = k;
         int m = k;
         do {
-          const double o =
-              Orient(at(prev[static_cast<std::size_t>(m)]), at(m), at(next[static_cast<std::size_t>(m)]));
+          const double o = Orient(at(prev[static_cast<std::size_t>(m)]), at(m),
+                                  at(next[static_cast<std::size_t>(m)]));
           if (o > best) {
             best = o;
             k = m;

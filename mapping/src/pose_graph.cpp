@@ -60,8 +60,7 @@ void PoseGraph::AddEdge(const PoseGraphEdge& edge) {
                   "edge " << edge.from << "->" << edge.to << ": information not symmetric");
   const Eigen::LLT<Matrix6d> llt(edge.information);
   PLANESLAM_CHECK(llt.info() == Eigen::Success && Matrix6d(llt.matrixL()).allFinite(),
-                  "edge " << edge.from << "->" << edge.to
-                          << ": information not positive definite");
+                  "edge " << edge.from << "->" << edge.to << ": information not positive definite");
   edges_.push_back(edge);
 }
 
@@ -166,7 +165,8 @@ class RelativePoseError {
 
 ceres::LossFunction* MakeLoopClosureLoss(const PoseGraphConfig& config) {
   // Ceres' losses act on s = |r|^2 with scale a: quadratic for s < a^2.
-  if (config.loop_closure_loss == "huber") return new ceres::HuberLoss(config.loop_closure_loss_scale);
+  if (config.loop_closure_loss == "huber")
+    return new ceres::HuberLoss(config.loop_closure_loss_scale);
   if (config.loop_closure_loss == "cauchy") {
     return new ceres::CauchyLoss(config.loop_closure_loss_scale);
   }

@@ -53,9 +53,9 @@ PoseGraph RandomGraph(unsigned seed) {
     PoseGraphNode node;
     node.id = 100 + i;
     node.position = Eigen::Vector3d(uniform(rng), uniform(rng), uniform(rng));
-    node.rotation = Eigen::Quaterniond(Eigen::Vector4d(uniform(rng), uniform(rng), uniform(rng),
-                                                       uniform(rng)))
-                        .normalized();
+    node.rotation =
+        Eigen::Quaterniond(Eigen::Vector4d(uniform(rng), uniform(rng), uniform(rng), uniform(rng)))
+            .normalized();
     node.fixed = i == 3;
     graph.AddNode(node);
   }
@@ -196,9 +196,7 @@ TEST(G2oIo, FixAndOrderIndependence) {
   EXPECT_EQ(graph.edges()[0].information(3, 3), 1.0);
 }
 
-TEST(G2oIo, MissingFileIsAnIoError) {
-  EXPECT_THROW(ReadG2o("/nonexistent/graph.g2o"), IoError);
-}
+TEST(G2oIo, MissingFileIsAnIoError) { EXPECT_THROW(ReadG2o("/nonexistent/graph.g2o"), IoError); }
 
 }  // namespace
 }  // namespace planeslam::mapping

@@ -2,9 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <functional>
-#include <Eigen/Geometry>
 #include <random>
 
 #include "planeslam/datasets/errors.hpp"
@@ -30,9 +30,7 @@ Points SampleRegion(const Inside& inside, double w, double h, std::size_t count,
 /// L-shape: 4 x 3 minus the top-right 2.5 x 2 block; area 12 - 5 = 7 m^2.
 bool InsideL(const Eigen::Vector2d& p) { return !(p.x() > 1.5 && p.y() > 1.0); }
 /// 3 x 2 rectangle with a 1 x 1.2 notch cut into the middle of its top side; area 6 - 1.2 = 4.8.
-bool InsideNotch(const Eigen::Vector2d& p) {
-  return !(p.x() > 1.0 && p.x() < 2.0 && p.y() > 0.8);
-}
+bool InsideNotch(const Eigen::Vector2d& p) { return !(p.x() > 1.0 && p.x() < 2.0 && p.y() > 0.8); }
 
 double TriangulatedArea(const Points& polygon) {
   double area = 0.0;
@@ -151,9 +149,9 @@ TEST(ConcaveHull, ExplicitCellAndNoSimplification) {
 
 TEST(Polygon, SimplicityPredicate) {
   EXPECT_TRUE(IsSimplePolygon({{0, 0}, {1, 0}, {1, 1}, {0, 1}}));
-  EXPECT_FALSE(IsSimplePolygon({{0, 0}, {1, 1}, {1, 0}, {0, 1}}));        // bow tie
-  EXPECT_FALSE(IsSimplePolygon({{0, 0}, {2, 0}, {1, 0}, {1, 1}}));        // fold back
-  EXPECT_FALSE(IsSimplePolygon({{0, 0}, {1, 0}, {1, 0}, {0, 1}}));        // repeated vertex
+  EXPECT_FALSE(IsSimplePolygon({{0, 0}, {1, 1}, {1, 0}, {0, 1}}));          // bow tie
+  EXPECT_FALSE(IsSimplePolygon({{0, 0}, {2, 0}, {1, 0}, {1, 1}}));          // fold back
+  EXPECT_FALSE(IsSimplePolygon({{0, 0}, {1, 0}, {1, 0}, {0, 1}}));          // repeated vertex
   EXPECT_FALSE(IsSimplePolygon({{0, 0}, {2, 0}, {2, 2}, {1, 0}, {0, 2}}));  // vertex on an edge
   EXPECT_FALSE(IsSimplePolygon({{0, 0}, {1, 0}}));
 }
@@ -183,7 +181,8 @@ TEST(Polygon, DouglasPeuckerKeepsOutlineWithinTolerance) {
 
 TEST(Polygon, EarClippingOfConcaveAndClockwisePolygons) {
   // A comb (deeply concave) and the same clockwise.
-  Points comb{{0, 0}, {5, 0}, {5, 3}, {4, 3}, {4, 1}, {3, 1}, {3, 3}, {2, 3}, {2, 1}, {1, 1}, {1, 3}, {0, 3}};
+  Points comb{{0, 0}, {5, 0}, {5, 3}, {4, 3}, {4, 1}, {3, 1},
+              {3, 3}, {2, 3}, {2, 1}, {1, 1}, {1, 3}, {0, 3}};
   const double area = SignedArea(comb);
   EXPECT_NEAR(area, 15.0 - 2 * 2 * 1, 1e-12);
   auto triangles = TriangulatePolygon(comb);
@@ -196,7 +195,8 @@ TEST(Polygon, EarClippingOfConcaveAndClockwisePolygons) {
   triangles = TriangulatePolygon(clockwise);
   EXPECT_EQ(triangles.size(), comb.size() - 2);
   double sum = 0;
-  for (const auto& t : triangles) sum += SignedArea({clockwise[t[0]], clockwise[t[1]], clockwise[t[2]]});
+  for (const auto& t : triangles)
+    sum += SignedArea({clockwise[t[0]], clockwise[t[1]], clockwise[t[2]]});
   EXPECT_NEAR(sum, area, 1e-12);
   // Collinear vertices on an edge still give n - 2 triangles with the right total area.
   Points square_with_midpoints{{0, 0}, {1, 0}, {2, 0}, {2, 2}, {1, 2}, {0, 2}};

@@ -78,9 +78,9 @@ NoisyLoop MakeNoisyLoop(int n, unsigned seed, double sigma_t, double sigma_r) {
   }
   // One loop closure: last -> first, measured exactly as precise as one odometry step.
   const Pose T_last_first = loop.truth.back().inverse() * loop.truth.front();
-  loop.graph.AddEdge(n - 1, 0,
-                     T_last_first * MakePose(RandomVector(rng, sigma_t), RandomVector(rng, sigma_r)),
-                     DiagonalInformation(sigma_t, sigma_r), EdgeKind::kLoopClosure);
+  loop.graph.AddEdge(
+      n - 1, 0, T_last_first * MakePose(RandomVector(rng, sigma_t), RandomVector(rng, sigma_r)),
+      DiagonalInformation(sigma_t, sigma_r), EdgeKind::kLoopClosure);
   return loop;
 }
 
@@ -113,8 +113,9 @@ TEST(PoseGraph, ExactGraphHasZeroCostAndStays) {
   for (int i = 0; i < 12; ++i) graph.AddNode(i, truth[static_cast<std::size_t>(i)]);
   for (int i = 0; i < 12; ++i) {
     const int j = (i + 1) % 12;
-    graph.AddEdge(i, j, truth[static_cast<std::size_t>(i)].inverse() * truth[static_cast<std::size_t>(j)],
-                  DiagonalInformation(0.1, 0.02), j == 0 ? EdgeKind::kLoopClosure : EdgeKind::kOdometry);
+    graph.AddEdge(
+        i, j, truth[static_cast<std::size_t>(i)].inverse() * truth[static_cast<std::size_t>(j)],
+        DiagonalInformation(0.1, 0.02), j == 0 ? EdgeKind::kLoopClosure : EdgeKind::kOdometry);
   }
   EXPECT_NEAR(PoseGraphCost(graph), 0.0, 1e-20);
   const PoseGraphResult result = OptimizePoseGraph(graph);
@@ -131,9 +132,9 @@ TEST(PoseGraph, ResidualMatchesDefinition) {
   PoseGraphEdge edge;
   const Eigen::Vector3d rotation_error(1e-3, -2e-3, 0.5e-3);
   edge.SetMeasurement(T_ab_true * MakePose({0.01, 0.02, -0.03}, {0, 0, 0}));
-  edge.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(rotation_error.norm(),
-                                                       rotation_error.normalized())) *
-                  edge.rotation;
+  edge.rotation =
+      Eigen::Quaterniond(Eigen::AngleAxisd(rotation_error.norm(), rotation_error.normalized())) *
+      edge.rotation;
   edge.information = Matrix6d::Identity();
   const auto eval = EvaluateEdgeResidual(edge, ToAmbient(T_a), ToAmbient(T_b));
   EXPECT_NEAR((eval.residual.head<3>() - T_ab_true.translation() + edge.translation).norm(), 0.0,
@@ -203,7 +204,8 @@ TEST(PoseGraph, RobustLossActsOnLoopClosuresOnly) {
 TEST(PoseGraph, CauchyLossResistsAWrongLoopClosure) {
   NoisyLoop loop = MakeNoisyLoop(40, 5, 0.01, 0.002);
   // A false loop closure 20 <- 0 claiming the poses are 3 m apart along x of truth's relative pose.
-  loop.graph.AddEdge(0, 20, loop.truth[0].inverse() * loop.truth[20] * MakePose({3, 0, 0}, {0, 0, 0}),
+  loop.graph.AddEdge(0, 20,
+                     loop.truth[0].inverse() * loop.truth[20] * MakePose({3, 0, 0}, {0, 0, 0}),
                      DiagonalInformation(0.01, 0.002), EdgeKind::kLoopClosure);
   PoseGraph plain = loop.graph;
   PoseGraphConfig none;

@@ -11,8 +11,8 @@
 /// applies S, writing undoes it; both are exact in binary floating point, so reading a file and
 /// writing it back reproduces every number of the file.
 ///
-/// Edge kinds are not stored by g2o: an edge from id a to id a+1 is read as odometry, any other as a
-/// loop closure (the usual layout of SLAM pose graphs).
+/// Edge kinds are not stored by g2o: an edge from id a to id a+1 is read as odometry, any other as
+/// a loop closure (the usual layout of SLAM pose graphs).
 #include <iosfwd>
 #include <string>
 

@@ -11,17 +11,18 @@
 ///     extreme samples lie 2/3 of a cell into the outermost cells, where step 3 puts the contour.
 ///  2. Smooth the binary occupancy with a 3x3 box filter. Small gaps of the sampling (an empty cell
 ///     among occupied ones) stay inside; isolated outlier cells fall below the iso level.
-///  3. Marching squares at iso level 11/18 on the smoothed field. On a straight edge the last occupied
-///     cell has smoothed value 6/9 and the next 3/9, so the contour passes 1/6 cell outside the centre
-///     of the boundary cells: close to the true edge, which lies uniformly within those cells (an
-///     outline along the cells' outer edges would overestimate the area by half a cell times the
-///     perimeter). 11/18 lies strictly between the possible values 5/9 and 6/9, so the contour never
-///     passes through a sample and is a set of disjoint simple closed curves.
-///  4. Keep the curve enclosing the largest area (the outer boundary of the largest region; holes and
+///  3. Marching squares at iso level 11/18 on the smoothed field. On a straight edge the last
+///  occupied
+///     cell has smoothed value 6/9 and the next 3/9, so the contour passes 1/6 cell outside the
+///     centre of the boundary cells: close to the true edge, which lies uniformly within those
+///     cells (an outline along the cells' outer edges would overestimate the area by half a cell
+///     times the perimeter). 11/18 lies strictly between the possible values 5/9 and 6/9, so the
+///     contour never passes through a sample and is a set of disjoint simple closed curves.
+///  4. Keep the curve enclosing the largest area (the outer boundary of the largest region; holes
+///  and
 ///     smaller separate regions are dropped), make it counter-clockwise, simplify it with
 ///     Douglas-Peucker, and fall back to a smaller tolerance if simplification made it non-simple.
 #include <Eigen/Core>
-
 #include <array>
 #include <cstddef>
 #include <string>
@@ -52,7 +53,8 @@ struct PolygonConfig {
   /// [m] grid cell of the hull (stretched per axis by a fraction to fit the extent, see the file
   /// comment); 0 = automatic from the point density
   double cell_size = 0.0;
-  double target_points_per_cell = 6.0;  ///< [points] mean count per cell when cell_size is automatic
+  double target_points_per_cell =
+      6.0;                          ///< [points] mean count per cell when cell_size is automatic
   double simplify_tolerance = 0.0;  ///< [m] Douglas-Peucker tolerance; 0 = half a cell, < 0 = none
   int max_grid_cells = 4000000;     ///< [cells] the cell grows when the grid would be larger
 

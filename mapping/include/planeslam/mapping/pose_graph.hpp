@@ -1,19 +1,20 @@
 #pragma once
 /// Pose graph: poses (nodes) linked by relative pose measurements (edges), optimised with Ceres.
 ///
-/// Residual of an edge a -> b with measurement (p_ab, q_ab), as in Ceres' examples/slam/pose_graph_3d:
+/// Residual of an edge a -> b with measurement (p_ab, q_ab), as in Ceres'
+/// examples/slam/pose_graph_3d:
 ///
 ///     r = U [ q_a^-1 (p_b - p_a) - p_ab ;  2 vec(q_ab * (q_a^-1 q_b)^-1) ]
 ///
 /// with U the upper Cholesky factor of the edge's information (U^T U = information), so that
 /// |r|^2 = e^T information e. Order of the 6 components: x y z, then rotation (about 1 rad per unit
-/// for small angles, since 2 vec(q) ~ angle * axis). Information matrices in this module are in this
-/// convention; g2o's rotation error is vec(q) (half of ours), see g2o_io.hpp for the conversion.
+/// for small angles, since 2 vec(q) ~ angle * axis). Information matrices in this module are in
+/// this convention; g2o's rotation error is vec(q) (half of ours), see g2o_io.hpp for the
+/// conversion.
 ///
 /// Ceres stays out of this header (mapping links it privately).
 #include <Eigen/Core>
 #include <Eigen/Geometry>
-
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -31,8 +32,8 @@ using Vector6d = Eigen::Matrix<double, 6, 1>;
 /// graph read from a file and written back reproduces the file's numbers exactly.
 struct PoseGraphNode {
   std::int64_t id = 0;
-  Eigen::Vector3d position = Eigen::Vector3d::Zero();                ///< p_world_node [m]
-  Eigen::Quaterniond rotation = Eigen::Quaterniond::Identity();      ///< q_world_node
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();            ///< p_world_node [m]
+  Eigen::Quaterniond rotation = Eigen::Quaterniond::Identity();  ///< q_world_node
   bool fixed = false;  ///< held constant by the optimiser (g2o FIX)
 
   /// T_world_node (the quaternion is normalised on the way).
@@ -46,8 +47,8 @@ enum class EdgeKind { kOdometry, kLoopClosure };
 struct PoseGraphEdge {
   std::int64_t from = 0;
   std::int64_t to = 0;
-  Eigen::Vector3d translation = Eigen::Vector3d::Zero();          ///< p_ab [m]
-  Eigen::Quaterniond rotation = Eigen::Quaterniond::Identity();   ///< q_ab
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();         ///< p_ab [m]
+  Eigen::Quaterniond rotation = Eigen::Quaterniond::Identity();  ///< q_ab
   /// Inverse covariance of the residual (x y z [1/m^2], rotation [1/rad^2]), symmetric positive
   /// definite, in this module's residual convention (see the file comment).
   Matrix6d information = Matrix6d::Identity();
@@ -90,8 +91,9 @@ class PoseGraph {
 
 /// Optimiser settings (YAML section "pose_graph").
 struct PoseGraphConfig {
-  int max_iterations = 200;  ///< [iterations] Levenberg-Marquardt steps at most (Ceres' example: 200)
-  double function_tolerance = 1e-6;   ///< [relative] stop when the cost changes less (Ceres default)
+  int max_iterations =
+      200;  ///< [iterations] Levenberg-Marquardt steps at most (Ceres' example: 200)
+  double function_tolerance = 1e-6;  ///< [relative] stop when the cost changes less (Ceres default)
   double gradient_tolerance = 1e-10;  ///< [relative] Ceres default
   double parameter_tolerance = 1e-8;  ///< [relative] Ceres default
   /// Robust loss on loop-closure edges only ("none", "huber", "cauchy"); odometry stays quadratic.
