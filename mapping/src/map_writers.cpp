@@ -131,12 +131,24 @@ Rgb8 PlaneColor(int id) {
   const double p = v * (1 - s), q = v * (1 - s * f), t = v * (1 - s * (1 - f));
   double r = 0, g = 0, b = 0;
   switch (sector) {
-    case 0: r = v, g = t, b = p; break;
-    case 1: r = q, g = v, b = p; break;
-    case 2: r = p, g = v, b = t; break;
-    case 3: r = p, g = q, b = v; break;
-    case 4: r = t, g = p, b = v; break;
-    default: r = v, g = p, b = q; break;
+    case 0:
+      r = v, g = t, b = p;
+      break;
+    case 1:
+      r = q, g = v, b = p;
+      break;
+    case 2:
+      r = p, g = v, b = t;
+      break;
+    case 3:
+      r = p, g = q, b = v;
+      break;
+    case 4:
+      r = t, g = p, b = v;
+      break;
+    default:
+      r = v, g = p, b = q;
+      break;
   }
   auto byte = [](double x) {
     return static_cast<std::uint8_t>(std::lround(std::clamp(x, 0.0, 1.0) * 255.0));
@@ -188,8 +200,8 @@ void WritePlaneMapObj(const std::string& path, const std::vector<MapPlaneRecord>
   std::size_t v = 0;
   for (std::size_t o = 0; o < mesh.objects.size(); ++o) {
     const std::size_t face_begin = mesh.objects[o].second;
-    const std::size_t face_end = o + 1 < mesh.objects.size() ? mesh.objects[o + 1].second
-                                                             : mesh.faces.size();
+    const std::size_t face_end =
+        o + 1 < mesh.objects.size() ? mesh.objects[o + 1].second : mesh.faces.size();
     out += "o plane_" + std::to_string(mesh.objects[o].first) + "\n";
     // This object's vertices: those referenced by its faces, which follow the previous object's.
     int max_index = -1;
@@ -243,9 +255,9 @@ void WritePlaneMapJson(const std::string& path, const std::vector<MapPlaneRecord
 
 void WriteColoredPointsPly(const std::string& path, const std::vector<Eigen::Vector3f>& points,
                            const std::vector<Rgb8>& colors, PlyFormat format) {
-  PLANESLAM_CHECK(colors.empty() || colors.size() == points.size(),
-                  "colors (" << colors.size() << ") must be empty or match points ("
-                             << points.size() << ")");
+  PLANESLAM_CHECK(
+      colors.empty() || colors.size() == points.size(),
+      "colors (" << colors.size() << ") must be empty or match points (" << points.size() << ")");
   std::vector<Eigen::Vector3f> kept;
   std::vector<Rgb8> kept_colors;
   kept.reserve(points.size());

@@ -192,7 +192,8 @@ OccupancyMapBuilder::~OccupancyMapBuilder() = default;
 OccupancyMapBuilder::OccupancyMapBuilder(OccupancyMapBuilder&&) noexcept = default;
 OccupancyMapBuilder& OccupancyMapBuilder::operator=(OccupancyMapBuilder&&) noexcept = default;
 
-void OccupancyMapBuilder::Insert(const datasets::OrganizedCloud& cloud, const Pose& T_world_sensor) {
+void OccupancyMapBuilder::Insert(const datasets::OrganizedCloud& cloud,
+                                 const Pose& T_world_sensor) {
   std::vector<Eigen::Vector3f> points;
   points.reserve(cloud.size());
   for (const auto& p : cloud.points) {

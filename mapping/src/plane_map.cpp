@@ -1,7 +1,6 @@
 #include "planeslam/mapping/plane_map.hpp"
 
 #include <Eigen/Eigenvalues>
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -14,7 +13,8 @@ namespace {
 
 constexpr double kDegToRad = M_PI / 180.0;
 /// An extent's basis is rebuilt when the plane's normal has turned by more than this since: the
-/// in-plane coordinates of a point 10 m away then shift by less than 10 m * (1 - cos 1 deg) = 1.5 mm.
+/// in-plane coordinates of a point 10 m away then shift by less than 10 m * (1 - cos 1 deg) = 1.5
+/// mm.
 constexpr double kExtentRebuildAngleDeg = 1.0;
 
 std::int64_t CellKey(std::int64_t i, std::int64_t j) {
@@ -170,8 +170,7 @@ PlaneMap::PlaneMap(const PlaneMapConfig& config) : config_(config) {
   PLANESLAM_CHECK(problems.empty(), "invalid PlaneMapConfig: " << problems.front());
 }
 
-PlaneObservation PlaneMap::MakeObservation(std::int64_t keyframe_id,
-                                           const detection::Plane& plane,
+PlaneObservation PlaneMap::MakeObservation(std::int64_t keyframe_id, const detection::Plane& plane,
                                            const std::vector<Eigen::Vector3f>* points) const {
   PlaneObservation obs;
   obs.keyframe_id = keyframe_id;
@@ -313,9 +312,8 @@ bool PlaneMap::Coincide(const MapPlane& a, const MapPlane& b) const {
   for (const std::int64_t key : eb.fine) {
     const std::int64_t i = key >> 32;
     const std::int64_t j = static_cast<std::int32_t>(key & 0xffffffff);
-    cells.push_back(eb.basis.Unproject(
-        Eigen::Vector2d((static_cast<double>(i) + 0.5) * eb.cell,
-                        (static_cast<double>(j) + 0.5) * eb.cell)));
+    cells.push_back(eb.basis.Unproject(Eigen::Vector2d((static_cast<double>(i) + 0.5) * eb.cell,
+                                                       (static_cast<double>(j) + 0.5) * eb.cell)));
   }
   std::sort(cells.begin(), cells.end(), [](const Eigen::Vector3d& x, const Eigen::Vector3d& y) {
     return std::lexicographical_compare(x.data(), x.data() + 3, y.data(), y.data() + 3);
@@ -560,13 +558,15 @@ MapPlaneOutline PlaneMap::Outline(const MapPlane& plane) const {
     const double cell =
         out.polygon.cell_size > 0 ? out.polygon.cell_size : 2.0 * config_.sample_cell_size;
     std::unordered_set<std::int64_t> occupied;
-    for (const auto& p : xy) occupied.insert(CellKey(FloorIndex(p.x(), cell), FloorIndex(p.y(), cell)));
+    for (const auto& p : xy)
+      occupied.insert(CellKey(FloorIndex(p.x(), cell), FloorIndex(p.y(), cell)));
     std::int64_t boundary_edges = 0;
     for (const std::int64_t key : occupied) {
       const std::int64_t i = key >> 32;
       const std::int64_t j = static_cast<std::int32_t>(key & 0xffffffff);
-      boundary_edges += (occupied.count(CellKey(i + 1, j)) == 0) + (occupied.count(CellKey(i - 1, j)) == 0) +
-                        (occupied.count(CellKey(i, j + 1)) == 0) + (occupied.count(CellKey(i, j - 1)) == 0);
+      boundary_edges +=
+          (occupied.count(CellKey(i + 1, j)) == 0) + (occupied.count(CellKey(i - 1, j)) == 0) +
+          (occupied.count(CellKey(i, j + 1)) == 0) + (occupied.count(CellKey(i, j - 1)) == 0);
     }
     // Boundary bias: the cell holding the outermost sample reaches cell/2 beyond it on average, and
     // that sample (a mean over a sample cell cut by the true edge) lies sample_cell/4 inside the

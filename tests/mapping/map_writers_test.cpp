@@ -273,8 +273,8 @@ TEST(MapWriters, RecordsFromAPlaneMapCarryOutlinesOnTheirPlanes) {
   EXPECT_EQ(r.triangles.size(), r.polygon.size() - 2);
   for (const auto& v : r.polygon) EXPECT_NEAR(v.z(), 3.0, 1e-9);
   EXPECT_EQ(r.color, PlaneColor(1));
-  EXPECT_TRUE(MakeMapRecords(map, 2).empty());         // seen once only
-  EXPECT_TRUE(MakeMapRecords(map, 1, 2.5).empty());    // smaller than 2.5 m^2
+  EXPECT_TRUE(MakeMapRecords(map, 2).empty());       // seen once only
+  EXPECT_TRUE(MakeMapRecords(map, 1, 2.5).empty());  // smaller than 2.5 m^2
   EXPECT_EQ(MakeMapRecords(map, 1, 1.5).size(), 1u);
 }
 

@@ -30,7 +30,8 @@ std::vector<Eigen::Vector3f> Wall(float depth) {
 
 Pose SomePose() {
   Pose T = Pose::Identity();
-  T.linear() = Eigen::AngleAxisd(0.4, Eigen::Vector3d(0.2, 1.0, -0.3).normalized()).toRotationMatrix();
+  T.linear() =
+      Eigen::AngleAxisd(0.4, Eigen::Vector3d(0.2, 1.0, -0.3).normalized()).toRotationMatrix();
   T.translation() = Eigen::Vector3d(1.5, -2.0, 0.7);
   return T;
 }

@@ -39,7 +39,8 @@ std::vector<Eigen::Vector3d> Sample(const Rect& r, double h) {
 bool Visible(const Pose& T_world_sensor, const Eigen::Vector3d& p_world) {
   const Eigen::Vector3d p = T_world_sensor.inverse() * p_world;
   if (p.z() < 0.5 || p.norm() > 4.0) return false;
-  return std::abs(p.x() / p.z()) < std::tan(29 * kDeg) && std::abs(p.y() / p.z()) < std::tan(22.5 * kDeg);
+  return std::abs(p.x() / p.z()) < std::tan(29 * kDeg) &&
+         std::abs(p.y() / p.z()) < std::tan(22.5 * kDeg);
 }
 
 /// A sensor at `position` looking along yaw (about world z) and pitch (down is negative); sensor
@@ -118,7 +119,8 @@ std::vector<Pose> RoomPoses() {
   std::vector<Pose> poses;
   for (int k = 0; k < 8; ++k) {
     const double yaw = k * 45.0 * kDeg;
-    poses.push_back(LookPose(Eigen::Vector3d(3.0 + 0.3 * std::cos(yaw), 2.0, 1.4), yaw, -25 * kDeg));
+    poses.push_back(
+        LookPose(Eigen::Vector3d(3.0 + 0.3 * std::cos(yaw), 2.0, 1.4), yaw, -25 * kDeg));
   }
   return poses;
 }
@@ -225,7 +227,8 @@ TEST(PlaneMap, RoomPlanesAppearOnceWithAccurateNormalsAndAreas) {
   int created = 0;
   for (std::size_t k = 0; k < poses.size(); ++k) {
     const SimFrame f = Simulate(rects, h, poses[k], Visible, 0.005, rng, &seen);
-    const FrameAssociation a = map.AddObservations(static_cast<std::int64_t>(k), poses[k], f.planes, f.points);
+    const FrameAssociation a =
+        map.AddObservations(static_cast<std::int64_t>(k), poses[k], f.planes, f.points);
     ASSERT_EQ(a.map_ids.size(), f.planes.size());
     for (int id : a.map_ids) EXPECT_GT(id, 0);
     created += a.created;
@@ -249,8 +252,9 @@ TEST(PlaneMap, RoomPlanesAppearOnceWithAccurateNormalsAndAreas) {
     // seen region with its holes filled, and the observed area with the seen area.
     EXPECT_NEAR(outline.polygon.area, filled_area, 0.15 * filled_area) << "rect " << r;
     EXPECT_NEAR(outline.observed_area, true_area, 0.15 * true_area) << "rect " << r;
-    std::printf("rect %zu: seen %.3f m^2 (filled %.3f), outline %.3f, observed %.3f, angle %.3f deg\n",
-                r, true_area, filled_area, outline.polygon.area, outline.observed_area, angle);
+    std::printf(
+        "rect %zu: seen %.3f m^2 (filled %.3f), outline %.3f, observed %.3f, angle %.3f deg\n", r,
+        true_area, filled_area, outline.polygon.area, outline.observed_area, angle);
     // Outline vertices lie on the map plane.
     for (const auto& v : outline.vertices) EXPECT_NEAR(p->normal.dot(v), p->d, 1e-9);
     // The normal points away from the sensors that saw it.
@@ -324,9 +328,13 @@ TEST(PlaneMap, CoplanarButDistantOrOppositePlanesStayApart) {
   std::mt19937 rng(3);
   PlaneMap map;
   const Pose T_top = LookPose(Eigen::Vector3d(2.5, 0.5, 2.5), 0, -M_PI / 2 + 0.01);
-  const SimFrame f1 = Simulate(rects, 0.02, T_top, [](const Pose&, const Eigen::Vector3d& p) { return p.x() < 2; }, 0.003, rng);
+  const SimFrame f1 = Simulate(
+      rects, 0.02, T_top, [](const Pose&, const Eigen::Vector3d& p) { return p.x() < 2; }, 0.003,
+      rng);
   map.AddObservations(0, T_top, f1.planes, f1.points);
-  const SimFrame f2 = Simulate(rects, 0.02, T_top, [](const Pose&, const Eigen::Vector3d& p) { return p.x() > 2; }, 0.003, rng);
+  const SimFrame f2 = Simulate(
+      rects, 0.02, T_top, [](const Pose&, const Eigen::Vector3d& p) { return p.x() > 2; }, 0.003,
+      rng);
   map.AddObservations(1, T_top, f2.planes, f2.points);
   EXPECT_EQ(map.size(), 2u);
   EXPECT_EQ(map.MergeCoincidentPlanes(), 0);

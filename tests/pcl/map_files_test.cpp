@@ -2,11 +2,11 @@
 // and the JSON in nlohmann-json, with the content that was written.
 #include <gtest/gtest.h>
 #include <pcl/PolygonMesh.h>
+#include <pcl/common/io.h>
 #include <pcl/conversions.h>
 #include <pcl/io/obj_io.h>
 #include <pcl/io/ply_io.h>
 #include <pcl/io/vtk_lib_io.h>
-#include <pcl/common/io.h>
 #include <pcl/point_types.h>
 
 #include <fstream>

@@ -13,10 +13,9 @@
 ///    "planes": [{id, normal, d, centroid, area, observed_area, point_count, rms, observations,
 ///    first_frame, last_frame, color, polygon: [[x, y, z], ...]}]} (metres; the normal points away
 ///    from the sensors that saw the plane; the polygon is counter-clockwise about the normal).
-/// Mesh faces are wound counter-clockwise as seen by the observers (right-hand face normal = -normal),
-/// so viewers with back-face culling show each plane from the side it was seen from.
+/// Mesh faces are wound counter-clockwise as seen by the observers (right-hand face normal =
+/// -normal), so viewers with back-face culling show each plane from the side it was seen from.
 #include <Eigen/Core>
-
 #include <array>
 #include <cstdint>
 #include <string>
@@ -35,12 +34,12 @@ struct MapPlaneRecord {
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();   ///< unit, world
   double d = 0.0;                                      ///< n . p = d [m]
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();  ///< [m]
-  std::vector<Eigen::Vector3d> polygon;                ///< outline vertices, world [m]; may be empty
-  std::vector<std::array<int, 3>> triangles;           ///< indices into polygon
-  double area = 0.0;            ///< outline area [m^2]
-  double observed_area = 0.0;   ///< observed area (holes excluded) [m^2]
+  std::vector<Eigen::Vector3d> polygon;       ///< outline vertices, world [m]; may be empty
+  std::vector<std::array<int, 3>> triangles;  ///< indices into polygon
+  double area = 0.0;                          ///< outline area [m^2]
+  double observed_area = 0.0;                 ///< observed area (holes excluded) [m^2]
   std::int64_t point_count = 0;
-  double rms = 0.0;             ///< sqrt(mse) of the fit [m]
+  double rms = 0.0;  ///< sqrt(mse) of the fit [m]
   int observations = 0;
   std::int64_t first_frame = 0;  ///< keyframe ids
   std::int64_t last_frame = 0;

@@ -7,11 +7,11 @@
 ///
 /// Each frame is voxel-downsampled in the sensor frame first (dense depth images put many rays into
 /// one voxel; the ray casting cost is per ray), transformed to the world and inserted with
-/// insertPointCloud(points, sensor origin, max_range): voxels along each ray become more likely free
-/// (prob_miss), the end voxel more likely occupied (prob_hit); rays longer than max_range only clear
-/// up to max_range (far depth is noisy, and long grazing rays erode floors: PRIOR-ART.md, OctoMap).
+/// insertPointCloud(points, sensor origin, max_range): voxels along each ray become more likely
+/// free (prob_miss), the end voxel more likely occupied (prob_hit); rays longer than max_range only
+/// clear up to max_range (far depth is noisy, and long grazing rays erode floors: PRIOR-ART.md,
+/// OctoMap).
 #include <Eigen/Core>
-
 #include <cstddef>
 #include <memory>
 #include <string>
@@ -23,7 +23,8 @@
 namespace planeslam::mapping {
 
 struct OccupancyMapConfig {
-  bool enabled = true;  ///< whether 'planeslam run' builds and writes the map (the builder ignores it)
+  bool enabled =
+      true;  ///< whether 'planeslam run' builds and writes the map (the builder ignores it)
   double resolution = 0.05;        ///< [m] leaf voxel edge
   double max_range = 4.0;          ///< [m] longer rays only clear free space up to here; <= 0: none
   double downsample_voxel = 0.05;  ///< [m] voxel grid applied to each frame first; 0 = off

@@ -3,14 +3,14 @@
 ///
 /// An observation is one detected plane of one keyframe. It keeps the plane's point statistics in
 /// the SENSOR frame (count, centroid, scatter) and a bounded set of sample points of its visible
-/// region (one mean point per cell of a grid on the plane, sensor frame), so that when keyframe poses
-/// change after pose-graph optimisation the world plane is re-fitted exactly from the transformed
-/// statistics (Refit) instead of being frozen at the poses it was first seen with.
+/// region (one mean point per cell of a grid on the plane, sensor frame), so that when keyframe
+/// poses change after pose-graph optimisation the world plane is re-fitted exactly from the
+/// transformed statistics (Refit) instead of being frozen at the poses it was first seen with.
 ///
 /// Association of an observation (world normal n_o, centroid c_o, world sample points) with a map
 /// plane (n, d, extent) requires, all three:
-///   - angle(n_o, n) < max_normal_angle_deg (oriented: both normals point away from the sensors that
-///     saw them, so a wall's two faces stay apart);
+///   - angle(n_o, n) < max_normal_angle_deg (oriented: both normals point away from the sensors
+///     that saw them, so a wall's two faces stay apart);
 ///   - |n . c_o - d| < max_offset + max_offset_range_coeff r^2 (the observation's mass centre lies
 ///     near the map plane; r its range from the sensor, for the depth noise);
 ///   - at least min_touch_points of the observation's samples lie within max_gap of the map plane's
@@ -24,7 +24,6 @@
 /// can be negative (unlike detection::Plane, whose d >= 0 holds in the sensor frame only).
 #include <Eigen/Core>
 #include <Eigen/Geometry>
-
 #include <cstdint>
 #include <string>
 #include <unordered_map>
@@ -62,20 +61,20 @@ struct PointStats {
 struct PlaneMapConfig {
   double max_normal_angle_deg = 10.0;  ///< [deg] observation vs map plane normals
   double max_offset = 0.10;            ///< [m] observation centroid to map plane distance
-  /// [1/m] the offset gate grows by this times r^2, r = range of the observation's centroid from its
-  /// sensor: depth noise grows quadratically (Kinect sigma(z) = 1.425e-3 z^2, Khoshelham & Elberink
-  /// 2012; 3 sigma = 0.0043 z^2), and far detections are biased by it. 0 = constant gate.
+  /// [1/m] the offset gate grows by this times r^2, r = range of the observation's centroid from
+  /// its sensor: depth noise grows quadratically (Kinect sigma(z) = 1.425e-3 z^2, Khoshelham &
+  /// Elberink 2012; 3 sigma = 0.0043 z^2), and far detections are biased by it. 0 = constant gate.
   double max_offset_range_coeff = 0.0043;
-  double max_gap = 0.30;   ///< [m] largest gap between an observation and a map plane's extent
+  double max_gap = 0.30;     ///< [m] largest gap between an observation and a map plane's extent
   int min_touch_points = 3;  ///< [samples] within max_gap for the extents to count as touching
   double merge_max_normal_angle_deg = 5.0;  ///< [deg] between two map planes to merge them
-  double merge_max_offset = 0.05;  ///< [m] each map plane's centroid to the other plane, to merge
+  double merge_max_offset = 0.05;   ///< [m] each map plane's centroid to the other plane, to merge
   int min_observation_points = 50;  ///< [points] smaller detected planes are not added to the map
   double sample_cell_size = 0.04;   ///< [m] grid cell of the per-observation samples
   int max_samples_per_observation = 3000;  ///< [samples] the cell doubles until below this
   /// [px] AddFrame samples every n-th row and column of depth-camera (pinhole) clouds: at 640 px
-  /// and 58 deg a pixel spans 1.6 mm per metre of range, so n = 2 still puts several points in every
-  /// 4 cm sample cell up to ~10 m. Spherical (LiDAR) range images always use every pixel.
+  /// and 58 deg a pixel spans 1.6 mm per metre of range, so n = 2 still puts several points in
+  /// every 4 cm sample cell up to ~10 m. Spherical (LiDAR) range images always use every pixel.
   int sample_pixel_stride = 2;
   PolygonConfig polygon{0.08, 6.0, 0.0, 4000000};  ///< outline of each map plane (ConcaveHull)
 
@@ -86,8 +85,8 @@ struct PlaneMapConfig {
 /// One detected plane of one keyframe, as kept by the map.
 struct PlaneObservation {
   std::int64_t keyframe_id = 0;
-  int detection_id = 0;         ///< the plane's id in its frame's segmentation
-  PointStats stats_sensor;      ///< point statistics in the sensor frame
+  int detection_id = 0;     ///< the plane's id in its frame's segmentation
+  PointStats stats_sensor;  ///< point statistics in the sensor frame
   Eigen::Vector3d normal_sensor = Eigen::Vector3d::UnitZ();  ///< detected normal (sensor frame)
   /// Mean point per sample cell [m], sensor frame; only the samples that extended the map plane's
   /// extent when the observation was added (memory grows with area, not with keyframes).
@@ -112,9 +111,9 @@ struct MapPlane {
 /// Outline of a map plane (ConcaveHull of its world samples projected on the plane).
 struct MapPlaneOutline {
   int id = 0;
-  PlaneBasis basis;                      ///< plane coordinates of `polygon`
-  Polygon2 polygon;                      ///< counter-clockwise, area in polygon.area [m^2]
-  std::vector<Eigen::Vector3d> vertices;  ///< polygon vertices in the world [m]
+  PlaneBasis basis;                           ///< plane coordinates of `polygon`
+  Polygon2 polygon;                           ///< counter-clockwise, area in polygon.area [m^2]
+  std::vector<Eigen::Vector3d> vertices;      ///< polygon vertices in the world [m]
   std::vector<std::array<int, 3>> triangles;  ///< ear clipping of the polygon (indices)
   /// Area actually observed [m^2]: occupied cells (polygon cell size) minus the expected overshoot
   /// of the boundary cells beyond the true edge (see the source). Unlike
