@@ -89,8 +89,7 @@ std::optional<double> TimestampFromFileName(const std::string& path) {
   std::smatch m;
   if (std::regex_search(stem, m, iso)) {
     const long days = DaysFromCivil(std::stol(m[1]), std::stol(m[2]), std::stol(m[3]));
-    double t = days * 86400.0 + std::stol(m[4]) * 3600.0 + std::stol(m[5]) * 60.0 +
-               std::stol(m[6]);
+    double t = days * 86400.0 + std::stol(m[4]) * 3600.0 + std::stol(m[5]) * 60.0 + std::stol(m[6]);
     if (m[7].matched) t += std::stod("0" + m[7].str());
     return t;
   }

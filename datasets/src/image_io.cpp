@@ -4,8 +4,8 @@
 
 #include <algorithm>
 #include <csetjmp>
-#include <cstring>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <memory>
 #include <sstream>
@@ -23,7 +23,6 @@ InputLimits& GlobalInputLimits() {
 }
 
 namespace {
-
 
 // libpng reports errors through longjmp; we keep the message to rethrow as IoError.
 struct PngErrorState {
@@ -112,8 +111,7 @@ Image16 ReadPng16(const std::string& path) {
 }
 
 Image16 DecodePng16(const std::string& bytes, const std::string& path) {
-  if (bytes.size() < 8 ||
-      png_sig_cmp(reinterpret_cast<png_const_bytep>(bytes.data()), 0, 8) != 0) {
+  if (bytes.size() < 8 || png_sig_cmp(reinterpret_cast<png_const_bytep>(bytes.data()), 0, 8) != 0) {
     throw IoError(path, "not a PNG file");
   }
   MemorySource source;
@@ -148,7 +146,8 @@ Image16 DecodePng16(const std::string& bytes, const std::string& path) {
   std::vector<png_bytep> rows(h.height);
   for (png_uint_32 r = 0; r < h.height; ++r) {
     if (h.bit_depth == 16) {
-      rows[r] = reinterpret_cast<png_bytep>(image.data.data() + static_cast<std::size_t>(r) * h.width);
+      rows[r] =
+          reinterpret_cast<png_bytep>(image.data.data() + static_cast<std::size_t>(r) * h.width);
     }
   }
   if (h.bit_depth != 16) {

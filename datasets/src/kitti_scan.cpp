@@ -191,7 +191,8 @@ std::optional<Pose> ReadVeloToCam(const fs::path& calib) {
   while (reader.Next(&line)) {
     const auto tok = detail::SplitWhitespace(line);
     if (tok.empty() || (tok[0] != "Tr:" && tok[0] != "Tr_velo_cam:")) continue;
-    if (tok.size() != 13) throw IoError(calib.string(), reader.line_number(), "Tr needs 12 numbers");
+    if (tok.size() != 13)
+      throw IoError(calib.string(), reader.line_number(), "Tr needs 12 numbers");
     Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
     for (int k = 0; k < 12; ++k) {
       if (!detail::ParseDouble(tok[k + 1], &m(k / 4, k % 4))) {
@@ -218,7 +219,8 @@ std::unique_ptr<FileSequence> OpenKittiFolder(const std::string& folder,
 
   std::vector<std::optional<Pose>> gt;
   std::string poses_path = config.lidar_poses_file;
-  if (poses_path.empty() && fs::exists(dir / "poses.txt", ec)) poses_path = (dir / "poses.txt").string();
+  if (poses_path.empty() && fs::exists(dir / "poses.txt", ec))
+    poses_path = (dir / "poses.txt").string();
   if (!poses_path.empty()) {
     const Trajectory poses = ReadKittiTrajectory(poses_path);
     const auto velo_to_cam = ReadVeloToCam(dir / "calib.txt");

@@ -114,7 +114,8 @@ XyzLayout FindXyz(const PcdHeader& h, const std::string& name) {
   for (int k = 0; k < 3; ++k) {
     layout.field[k] = h.FieldIndex(names[k]);
     if (layout.field[k] < 0) {
-      throw IoError(name, std::string("PCD has no field '") + names[k] + "' (FIELDS must include x y z)");
+      throw IoError(name,
+                    std::string("PCD has no field '") + names[k] + "' (FIELDS must include x y z)");
     }
     std::size_t offset = 0, element = 0;
     for (int f = 0; f < layout.field[k]; ++f) {
@@ -158,7 +159,8 @@ PcdHeader ParsePcdHeader(const std::string& bytes, const std::string& name) {
     std::string_view line(bytes.data() + pos, end - pos);
     pos = std::min(end + 1, bytes.size());
     ++line_no;
-    if (line_no > 1000) throw IoError(name, "not a PCD file (no DATA line in the first 1000 lines)");
+    if (line_no > 1000)
+      throw IoError(name, "not a PCD file (no DATA line in the first 1000 lines)");
     line = detail::Trim(line);
     if (line.empty() || line.front() == '#') continue;
     const auto tok = detail::SplitWhitespace(line);
@@ -174,16 +176,17 @@ PcdHeader ParsePcdHeader(const std::string& bytes, const std::string& name) {
     auto integer = [&](std::string_view t) {
       std::int64_t v = 0;
       if (!detail::ParseInt64(t, &v) || t.size() > 18) {
-        throw IoError(name, line_no,
-                      std::string(key) + ": expected a non-negative integer, got '" +
-                          std::string(t) + "'");
+        throw IoError(
+            name, line_no,
+            std::string(key) + ": expected a non-negative integer, got '" + std::string(t) + "'");
       }
       return v;
     };
     if (key == "VERSION") {
       continue;
     } else if (key == "FIELDS") {
-      if (n == 0 || n > kMaxFields) throw IoError(name, line_no, "FIELDS: expected 1 to 1024 names");
+      if (n == 0 || n > kMaxFields)
+        throw IoError(name, line_no, "FIELDS: expected 1 to 1024 names");
       h.fields.resize(n);
       for (std::size_t i = 0; i < n; ++i) h.fields[i].name = std::string(tok[i + 1]);
       have_fields = true;
@@ -214,8 +217,9 @@ PcdHeader ParsePcdHeader(const std::string& bytes, const std::string& name) {
       need(1);
       h.data = std::string(tok[1]);
       if (h.data != "ascii" && h.data != "binary" && h.data != "binary_compressed") {
-        throw IoError(name, line_no,
-                      "unknown DATA kind '" + h.data + "' (expected ascii, binary or binary_compressed)");
+        throw IoError(
+            name, line_no,
+            "unknown DATA kind '" + h.data + "' (expected ascii, binary or binary_compressed)");
       }
       h.data_offset = pos;
       break;
@@ -353,12 +357,12 @@ OrganizedCloud ParsePcd(const std::string& bytes, const std::string& name, doubl
                               std::to_string(available) + " bytes");
     }
     if (available > expected) {
-      throw IoError(name, std::to_string(available - expected) +
-                              " bytes of data beyond the " + std::to_string(n) +
-                              " points the header announces");
+      throw IoError(name, std::to_string(available - expected) + " bytes of data beyond the " +
+                              std::to_string(n) + " points the header announces");
     }
   } else if (h.data == "binary_compressed") {
-    if (available < 8) throw IoError(name, "truncated: binary_compressed data lacks its size words");
+    if (available < 8)
+      throw IoError(name, "truncated: binary_compressed data lacks its size words");
     std::uint32_t compressed = 0, uncompressed = 0;
     std::memcpy(&compressed, data, 4);
     std::memcpy(&uncompressed, data + 4, 4);
@@ -380,8 +384,9 @@ OrganizedCloud ParsePcd(const std::string& bytes, const std::string& name, doubl
                               " bytes the header needs");
     }
     if (available - 8 - compressed > kMaxCompressedPadding) {
-      throw IoError(name, std::to_string(available - 8 - compressed) +
-                              " bytes after the compressed block (size words disagree with the file)");
+      throw IoError(name,
+                    std::to_string(available - 8 - compressed) +
+                        " bytes after the compressed block (size words disagree with the file)");
     }
     decompressed = LzfDecompress(data + 8, compressed, expected, name);
   } else {
@@ -429,14 +434,13 @@ OrganizedCloud ParsePcd(const std::string& bytes, const std::string& name, doubl
     while (pos < bytes.size()) {
       std::size_t end = bytes.find('\n', pos);
       if (end == std::string::npos) end = bytes.size();
-      const std::string_view line =
-          detail::Trim(std::string_view(bytes.data() + pos, end - pos));
+      const std::string_view line = detail::Trim(std::string_view(bytes.data() + pos, end - pos));
       pos = end + 1;
       ++line_no;
       if (line.empty()) continue;
       if (i == n) {
-        throw IoError(name, "more ascii data than the " + std::to_string(n) +
-                                " points the header announces");
+        throw IoError(
+            name, "more ascii data than the " + std::to_string(n) + " points the header announces");
       }
       tok = detail::SplitWhitespace(line);
       if (tok.size() != elements) {

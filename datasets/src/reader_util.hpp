@@ -1,6 +1,6 @@
 #pragma once
-// Private helpers shared by the range-data readers: whole-file reads with size limits, strict number
-// parsing and line splitting. Not part of the public API.
+// Private helpers shared by the range-data readers: whole-file reads with size limits, strict
+// number parsing and line splitting. Not part of the public API.
 #include <cstdint>
 #include <string>
 #include <string_view>

@@ -94,8 +94,9 @@ CameraFile ParseCameraFile(const std::string& text, const std::string& name) {
     const std::string key(detail::Trim(line.substr(0, colon)));
     const std::string_view value = detail::Trim(line.substr(colon + 1));
     if (seen.count(key)) {
-      throw IoError(name, reader.line_number(),
-                    "duplicate key '" + key + "' (first on line " + std::to_string(seen[key]) + ")");
+      throw IoError(
+          name, reader.line_number(),
+          "duplicate key '" + key + "' (first on line " + std::to_string(seen[key]) + ")");
     }
     seen[key] = reader.line_number();
     if (key == "flip_y") {

@@ -22,9 +22,9 @@ std::vector<FrameListEntry> ParseFrameList(const std::string& text, const std::s
     if (trimmed.empty() || trimmed.front() == '#') continue;
     const auto tokens = detail::SplitWhitespace(trimmed);
     if (static_cast<int>(tokens.size()) != columns) {
-      throw IoError(name, reader.line_number(),
-                    "expected " + std::to_string(columns) + " columns, got " +
-                        std::to_string(tokens.size()));
+      throw IoError(
+          name, reader.line_number(),
+          "expected " + std::to_string(columns) + " columns, got " + std::to_string(tokens.size()));
     }
     FrameListEntry entry;
     if (!detail::ParseDouble(tokens[0], &entry.timestamp)) {
@@ -34,11 +34,11 @@ std::vector<FrameListEntry> ParseFrameList(const std::string& text, const std::s
     entry.file = std::string(tokens[1]);
     entry.line = reader.line_number();
     if (!entries.empty() && !(entry.timestamp > entries.back().timestamp)) {
-      throw IoError(name, reader.line_number(),
-                    std::string(entry.timestamp == entries.back().timestamp ? "duplicate"
-                                                                            : "unsorted") +
-                        " timestamp " + std::string(tokens[0]) + " (previous line " +
-                        std::to_string(entries.back().line) + ")");
+      throw IoError(
+          name, reader.line_number(),
+          std::string(entry.timestamp == entries.back().timestamp ? "duplicate" : "unsorted") +
+              " timestamp " + std::string(tokens[0]) + " (previous line " +
+              std::to_string(entries.back().line) + ")");
     }
     entries.push_back(std::move(entry));
   }

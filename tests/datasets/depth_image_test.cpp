@@ -113,7 +113,8 @@ TEST(DepthImage, ReadsPngWrittenToDisk) {
   const auto dir = test::ScratchDir();
   const PinholeIntrinsics k = SmallCamera();
   Image16 depth(k.width, k.height);
-  for (std::size_t i = 0; i < depth.data.size(); ++i) depth.data[i] = static_cast<std::uint16_t>(i * 100);
+  for (std::size_t i = 0; i < depth.data.size(); ++i)
+    depth.data[i] = static_cast<std::uint16_t>(i * 100);
   const std::string path = (dir / "d.png").string();
   WritePng16(path, depth);
   const OrganizedCloud cloud = ReadDepthCloud(path, k, 1000.0);

@@ -128,7 +128,8 @@ TEST(ImageIo, BadFilesAreIoErrorsNamingTheFile) {
   EXPECT_EQ(ErrorOf([&] { ReadPng16(dir.string()); }), dir.string() + ": not a regular file");
   // Truncated: a real 16-bit PNG cut in half, and cut inside the header.
   Image16 image(64, 48);
-  for (std::size_t i = 0; i < image.data.size(); ++i) image.data[i] = static_cast<std::uint16_t>(i * 37);
+  for (std::size_t i = 0; i < image.data.size(); ++i)
+    image.data[i] = static_cast<std::uint16_t>(i * 37);
   const fs::path cut = dir / "cut.png";
   WritePng16(cut.string(), image);
   fs::resize_file(cut, fs::file_size(cut) / 2);
@@ -150,14 +151,16 @@ TEST(ImageIo, BadFilesAreIoErrorsNamingTheFile) {
   EXPECT_EQ(msg.rfind(cut.string() + ": corrupt or truncated PNG", 0), 0u) << msg;
   // Colour image.
   WritePngRgb((dir / "rgb.png").string(), ImageRgb8(4, 4));
-  EXPECT_EQ(ErrorOf([&] { ReadPng16((dir / "rgb.png").string()); }),
-            (dir / "rgb.png").string() + ": expected a single-channel (grey) PNG, got colour type 2");
+  EXPECT_EQ(
+      ErrorOf([&] { ReadPng16((dir / "rgb.png").string()); }),
+      (dir / "rgb.png").string() + ": expected a single-channel (grey) PNG, got colour type 2");
 }
 
 TEST(ImageIo, EveryTruncationIsIoError) {
   const auto dir = test::ScratchDir();
   Image16 image(9, 7);
-  for (std::size_t i = 0; i < image.data.size(); ++i) image.data[i] = static_cast<std::uint16_t>(i * 977);
+  for (std::size_t i = 0; i < image.data.size(); ++i)
+    image.data[i] = static_cast<std::uint16_t>(i * 977);
   WritePng16((dir / "a.png").string(), image);
   std::ifstream in(dir / "a.png", std::ios::binary);
   const std::string bytes((std::istreambuf_iterator<char>(in)), {});
@@ -178,15 +181,17 @@ TEST(ImageIo, HugeHeaderIsRefusedBeforeAllocating) {
                 ": image size 1000000x1000000 is empty or exceeds the input limits");
   // The PNG maximum (2^31 - 1) a side, too.
   WriteBytes(dir / "max.png", MakeGreyPng(0x7fffffff, 2, 16, "ab", 2));
-  EXPECT_NE(ErrorOf([&] { ReadPng16((dir / "max.png").string()); }).find("exceeds the input limits"),
-            std::string::npos);
+  EXPECT_NE(
+      ErrorOf([&] { ReadPng16((dir / "max.png").string()); }).find("exceeds the input limits"),
+      std::string::npos);
   // The limits are the knob: a 64x48 image is refused under a 1000-pixel limit.
   WritePng16((dir / "ok.png").string(), Image16(64, 48));
   const InputLimits saved = GlobalInputLimits();
   GlobalInputLimits().max_pixels = 1000;
   const std::string msg = ErrorOf([&] { ReadPng16((dir / "ok.png").string()); });
   GlobalInputLimits() = saved;
-  EXPECT_EQ(msg, (dir / "ok.png").string() + ": image size 64x48 is empty or exceeds the input limits");
+  EXPECT_EQ(msg,
+            (dir / "ok.png").string() + ": image size 64x48 is empty or exceeds the input limits");
   EXPECT_EQ(ReadPng16((dir / "ok.png").string()).width, 64);
 }
 

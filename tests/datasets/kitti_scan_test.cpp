@@ -41,7 +41,8 @@ std::vector<LidarPoint> SyntheticScan(int rings, int per_ring, double range,
   std::vector<LidarPoint> pts;
   std::vector<double> el;
   for (int r = 0; r < rings; ++r) {
-    el.push_back(r < rings / 2 ? 2.0 - r * (1.0 / 3.0) : 2.0 - (rings / 2) / 3.0 - (r - rings / 2) * 0.5);
+    el.push_back(r < rings / 2 ? 2.0 - r * (1.0 / 3.0)
+                               : 2.0 - (rings / 2) / 3.0 - (r - rings / 2) * 0.5);
   }
   for (int r = 0; r < rings; ++r) {
     const double e = el[r] * kPi / 180.0;
@@ -81,7 +82,8 @@ TEST(KittiScan, ScanOrderRingsGiveOneRowPerLaser) {
     }
     EXPECT_EQ(n, 1000u);
   }
-  // Column c holds azimuth pi - 2 pi (c + 0.5) / cols: ahead (+x) in the middle, behind at the ends.
+  // Column c holds azimuth pi - 2 pi (c + 0.5) / cols: ahead (+x) in the middle, behind at the
+  // ends.
   for (int c = 0; c < image.width; ++c) {
     const auto& p = image.at(10, c);
     if (!OrganizedCloud::IsValid(p)) continue;
@@ -103,8 +105,7 @@ TEST(KittiScan, ScanOrderRingsGiveOneRowPerLaser) {
 
 TEST(KittiScan, CollisionsKeepTheNearerPoint) {
   std::vector<LidarPoint> scan = {LidarPoint(10, 0, 0, 0), LidarPoint(5, -0.0001f, 0, 0),
-                                  LidarPoint(0, 0, 0, 0),
-                                  LidarPoint(std::nanf(""), 1, 1, 0)};
+                                  LidarPoint(0, 0, 0, 0), LidarPoint(std::nanf(""), 1, 1, 0)};
   SensorConfig config;
   config.lidar_row_mode = "elevation";
   config.lidar_column_shift = 0;
@@ -139,8 +140,8 @@ TEST(KittiScan, RealScansProjectAlmostEveryPoint) {
           "%s %-10s points %zu placed %zu (%.2f%%) shifted %zu collisions %zu outside %zu "
           "invalid %zu rings %s\n",
           fs::path(path).filename().c_str(), mode, stats.points, stats.placed,
-          100.0 * stats.PlacedFraction(), stats.shifted, stats.collisions,
-          stats.outside_elevation, stats.invalid, stats.used_scan_order ? "yes" : "no");
+          100.0 * stats.PlacedFraction(), stats.shifted, stats.collisions, stats.outside_elevation,
+          stats.invalid, stats.used_scan_order ? "yes" : "no");
       EXPECT_EQ(image.CountValid(), stats.placed);
       if (std::string(mode) == "scan_order") {
         EXPECT_TRUE(stats.used_scan_order);
@@ -191,7 +192,10 @@ TEST(KittiScan, PosesByFrameNumberAndCalibration) {
   EXPECT_DOUBLE_EQ(seq->GroundTruth(1)->translation().x(), 3.0);
   EXPECT_DOUBLE_EQ(seq->GroundTruth(0)->translation().x(), 1.0);
   // Camera x is velodyne -y under KITTI's Tr (velodyne x forward = camera z).
-  { std::ofstream(dir / "calib.txt") << "P0: 1 0 0 0 0 1 0 0 0 0 1 0\nTr: 0 -1 0 0 0 0 -1 0 1 0 0 0\n"; }
+  {
+    std::ofstream(dir / "calib.txt")
+        << "P0: 1 0 0 0 0 1 0 0 0 0 1 0\nTr: 0 -1 0 0 0 0 -1 0 1 0 0 0\n";
+  }
   seq = OpenSequence(dir.string(), SensorConfig{});
   EXPECT_NEAR(seq->GroundTruth(1)->translation().y(), -3.0, 1e-12);
   EXPECT_NEAR(seq->GroundTruth(1)->translation().x(), 0.0, 1e-12);

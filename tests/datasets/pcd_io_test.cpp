@@ -168,7 +168,10 @@ TEST(PcdIo, TinyAsciiAndBinaryFilesRoundTrip) {
   std::vector<std::uint32_t> rgb(20, 0x00ff8000u);
   WritePcd((dir / "c.pcd").string(), c, &rgb);
   const PcdHeader h = ParsePcdHeader(
-      std::string(std::istreambuf_iterator<char>(std::ifstream(dir / "c.pcd", std::ios::binary).rdbuf()), {}), "c");
+      std::string(
+          std::istreambuf_iterator<char>(std::ifstream(dir / "c.pcd", std::ios::binary).rdbuf()),
+          {}),
+      "c");
   EXPECT_EQ(h.FieldIndex("rgb"), 3);
   EXPECT_EQ(h.point_bytes, 16u);
   EXPECT_EQ(ReadPcd((dir / "c.pcd").string()).CountValid(), c.CountValid());
@@ -204,56 +207,66 @@ TEST(PcdIo, LyingHeadersAreIoErrorsNamingTheFile) {
   EXPECT_EQ(ErrorOf([&] { ParsePcd(ToyHeader("binary", 7) + data, "f.pcd"); }),
             "f.pcd: header says POINTS 7 but WIDTH x HEIGHT is 3x2 = 6");
   // Data shorter / longer than announced.
-  EXPECT_TRUE(Contains(ErrorOf([&] { ParsePcd(ToyHeader("binary") + data.substr(0, 50), "f.pcd"); }),
-                       "f.pcd: truncated: header announces 6 points"));
+  EXPECT_TRUE(
+      Contains(ErrorOf([&] { ParsePcd(ToyHeader("binary") + data.substr(0, 50), "f.pcd"); }),
+               "f.pcd: truncated: header announces 6 points"));
   EXPECT_EQ(ErrorOf([&] { ParsePcd(ToyHeader("binary") + data + "xyz", "f.pcd"); }),
             "f.pcd: 3 bytes of data beyond the 6 points the header announces");
   // WIDTH x HEIGHT larger than the data (POINTS consistent with it).
-  EXPECT_TRUE(Contains(ErrorOf([&] {
-                         ParsePcd(Header(kToyFields, kToySize, kToyType, kToyCount, 3, 3, 9,
-                                         "binary") + data, "f.pcd");
-                       }),
-                       "f.pcd: truncated"));
+  EXPECT_TRUE(Contains(
+      ErrorOf([&] {
+        ParsePcd(Header(kToyFields, kToySize, kToyType, kToyCount, 3, 3, 9, "binary") + data,
+                 "f.pcd");
+      }),
+      "f.pcd: truncated"));
   // Compressed sizes that disagree.
   const std::string raw = ToySoaData();
   const std::string lzf = LzfLiterals(raw);
   std::string words;
   Append<std::uint32_t>(&words, static_cast<std::uint32_t>(lzf.size()));
   Append<std::uint32_t>(&words, static_cast<std::uint32_t>(raw.size() + 4));
-  EXPECT_TRUE(Contains(ErrorOf([&] { ParsePcd(ToyHeader("binary_compressed") + words + lzf, "f.pcd"); }),
-                       "f.pcd: compressed block says"));
+  EXPECT_TRUE(
+      Contains(ErrorOf([&] { ParsePcd(ToyHeader("binary_compressed") + words + lzf, "f.pcd"); }),
+               "f.pcd: compressed block says"));
   words.clear();
   Append<std::uint32_t>(&words, static_cast<std::uint32_t>(lzf.size() + 10));
   Append<std::uint32_t>(&words, static_cast<std::uint32_t>(raw.size()));
-  EXPECT_TRUE(Contains(ErrorOf([&] { ParsePcd(ToyHeader("binary_compressed") + words + lzf, "f.pcd"); }),
-                       "f.pcd: truncated: compressed block of"));
+  EXPECT_TRUE(
+      Contains(ErrorOf([&] { ParsePcd(ToyHeader("binary_compressed") + words + lzf, "f.pcd"); }),
+               "f.pcd: truncated: compressed block of"));
   words.clear();
   Append<std::uint32_t>(&words, static_cast<std::uint32_t>(lzf.size() - 5));
   Append<std::uint32_t>(&words, static_cast<std::uint32_t>(raw.size()));
-  EXPECT_TRUE(Contains(ErrorOf([&] { ParsePcd(ToyHeader("binary_compressed") + words + lzf, "f.pcd"); }),
-                       "f.pcd: corrupt LZF data"));
+  EXPECT_TRUE(
+      Contains(ErrorOf([&] { ParsePcd(ToyHeader("binary_compressed") + words + lzf, "f.pcd"); }),
+               "f.pcd: corrupt LZF data"));
   // Unknown DATA kind, missing field, bad header words.
   EXPECT_TRUE(Contains(ErrorOf([&] { ParsePcd(ToyHeader("binary_lz4") + data, "f.pcd"); }),
                        "unknown DATA kind 'binary_lz4'"));
   EXPECT_EQ(ErrorOf([&] {
-              ParsePcd(Header("x y", "4 4", "F F", "1 1", 1, 2, 2, "ascii") + "1 2\n3 4\n", "f.pcd");
+              ParsePcd(Header("x y", "4 4", "F F", "1 1", 1, 2, 2, "ascii") + "1 2\n3 4\n",
+                       "f.pcd");
             }),
             "f.pcd: PCD has no field 'z' (FIELDS must include x y z)");
   EXPECT_TRUE(Contains(ErrorOf([&] {
-                         ParsePcd(Header("x y z", "4 4", "F F F", "1 1 1", 1, 2, 2, "ascii"), "f.pcd");
+                         ParsePcd(Header("x y z", "4 4", "F F F", "1 1 1", 1, 2, 2, "ascii"),
+                                  "f.pcd");
                        }),
                        "one entry per field"));
   EXPECT_TRUE(Contains(ErrorOf([&] {
-                         ParsePcd(Header("x y z", "4 4 3", "F F F", "1 1 1", 1, 2, 2, "ascii"), "f.pcd");
+                         ParsePcd(Header("x y z", "4 4 3", "F F F", "1 1 1", 1, 2, 2, "ascii"),
+                                  "f.pcd");
                        }),
                        "SIZE must be 1, 2, 4 or 8"));
   EXPECT_EQ(ErrorOf([&] { ParsePcd("hello world\n", "f.pcd"); }),
             "f.pcd:1: unknown header keyword 'hello'");
-  EXPECT_EQ(ErrorOf([&] { ParsePcd("", "f.pcd"); }), "f.pcd: not a PCD file (no DATA line in the header)");
+  EXPECT_EQ(ErrorOf([&] { ParsePcd("", "f.pcd"); }),
+            "f.pcd: not a PCD file (no DATA line in the header)");
   // Ascii with too few / too many points or values.
   const std::string h2 = Header("x y z", "4 4 4", "F F F", "1 1 1", 1, 2, 2, "ascii");
-  EXPECT_EQ(ErrorOf([&] { ParsePcd(h2 + "1 2 3\n", "f.pcd"); }),
-            "f.pcd: truncated: 6 bytes of ascii data cannot hold the 2 points the header announces");
+  EXPECT_EQ(
+      ErrorOf([&] { ParsePcd(h2 + "1 2 3\n", "f.pcd"); }),
+      "f.pcd: truncated: 6 bytes of ascii data cannot hold the 2 points the header announces");
   EXPECT_EQ(ErrorOf([&] { ParsePcd(h2 + "1.5 2.5 3.5\n", "f.pcd"); }),
             "f.pcd: truncated: header announces 2 points, ascii data has 1");
   EXPECT_EQ(ErrorOf([&] { ParsePcd(h2 + "1 2 3\n1 2 3\n1 2 3\n", "f.pcd"); }),
@@ -266,29 +279,30 @@ TEST(PcdIo, LyingHeadersAreIoErrorsNamingTheFile) {
 
 TEST(PcdIo, HugeHeaderIsRefusedBeforeAllocating) {
   // 10^12 points: refused by the limits with no attempt to allocate.
-  const std::string h = Header("x y z", "4 4 4", "F F F", "1 1 1", 1000000, 1000000,
-                               1000000000000L, "binary");
+  const std::string h =
+      Header("x y z", "4 4 4", "F F F", "1 1 1", 1000000, 1000000, 1000000000000L, "binary");
   EXPECT_EQ(ErrorOf([&] { ParsePcd(h, "huge.pcd"); }),
             "huge.pcd: cloud of 1000000x1000000 points exceeds the input limits");
-  const std::string flat = Header("x y z", "4 4 4", "F F F", "1 1 1", 1000000000, 1000,
-                                  1000000000000L, "binary");
+  const std::string flat =
+      Header("x y z", "4 4 4", "F F F", "1 1 1", 1000000000, 1000, 1000000000000L, "binary");
   EXPECT_TRUE(Contains(ErrorOf([&] { ParsePcd(flat, "huge.pcd"); }), "exceeds the input limits"));
   // Within the limits but far beyond the data: refused before the cloud is allocated.
-  const std::string big_ascii = Header("x y z", "4 4 4", "F F F", "1 1 1", 8000, 8000, 64000000,
-                                       "ascii") + "1 2 3\n";
+  const std::string big_ascii =
+      Header("x y z", "4 4 4", "F F F", "1 1 1", 8000, 8000, 64000000, "ascii") + "1 2 3\n";
   EXPECT_EQ(ErrorOf([&] { ParsePcd(big_ascii, "big.pcd"); }),
             "big.pcd: truncated: 6 bytes of ascii data cannot hold the 64000000 points the header "
             "announces");
   std::string words;
   Append<std::uint32_t>(&words, 10);
   Append<std::uint32_t>(&words, 4000u * 4000u * 12u);
-  const std::string big_lzf = Header("x y z", "4 4 4", "F F F", "1 1 1", 4000, 4000, 16000000,
-                                     "binary_compressed") + words + std::string(10, '\0');
+  const std::string big_lzf =
+      Header("x y z", "4 4 4", "F F F", "1 1 1", 4000, 4000, 16000000, "binary_compressed") +
+      words + std::string(10, '\0');
   EXPECT_EQ(ErrorOf([&] { ParsePcd(big_lzf, "big.pcd"); }),
             "big.pcd: compressed block of 10 bytes cannot expand to the 192000000 bytes the header "
             "needs");
-  const std::string line = Header("x y z", "4 4 4", "F F F", "1 1 1", 2000000000, 1, 2000000000,
-                                  "binary");
+  const std::string line =
+      Header("x y z", "4 4 4", "F F F", "1 1 1", 2000000000, 1, 2000000000, "binary");
   EXPECT_TRUE(Contains(ErrorOf([&] { ParsePcd(line, "huge.pcd"); }), "exceeds the input limits"));
 }
 
@@ -422,7 +436,8 @@ TEST(PcdIo, LaserScanInCentimetresReadsInMetres) {
   SensorConfig config;
   config.unit_scale = 0.01;
   config.pcd_model = "spherical";
-  const Frame f = LoadSingleFrame((test::DataDir() / "laser_scans" / "scan000.pcd").string(), config);
+  const Frame f =
+      LoadSingleFrame((test::DataDir() / "laser_scans" / "scan000.pcd").string(), config);
   EXPECT_EQ(f.cloud.width, 513);
   EXPECT_EQ(f.cloud.height, 633);
   EXPECT_EQ(f.cloud.model, SensorModel::kSpherical);

@@ -167,8 +167,9 @@ TEST(TumSequence, IntrinsicsFileIsStrict) {
             yaml + ": missing key 'depth_scale'");
   WriteText(dir / "intrinsics.yaml",
             "width: 4\nheight: 3\nfx: 5\nfy: 5\ncx: 1\ncy: 1\ndepth_scale: 1\nk1: 0\n");
-  EXPECT_NE(ErrorOf([&] { OpenSequence(dir.string(), SensorConfig{}); })
-                .find(yaml + ":8: unknown key 'k1'"),
+  EXPECT_NE(ErrorOf([&] {
+              OpenSequence(dir.string(), SensorConfig{});
+            }).find(yaml + ":8: unknown key 'k1'"),
             std::string::npos);
   WriteText(dir / "intrinsics.yaml",
             "width: 4\nheight: 3\nfx: five\nfy: 5\ncx: 1\ncy: 1\ndepth_scale: 1\n");
@@ -212,7 +213,8 @@ fs::path MakeIclFolder(const fs::path& dir, IclScene* scene) {
         const Eigen::Vector3d ray((u - cx) / fx, -(v - cy) / fy, 1.0);
         const double denom = scene->n.dot(T.linear() * ray);
         const double z = (scene->d - scene->n.dot(T.translation())) / denom;
-        if (z > 0.3 && z < 10.0) depth.data[v * 640 + u] = static_cast<std::uint16_t>(std::lround(z * 5000));
+        if (z > 0.3 && z < 10.0)
+          depth.data[v * 640 + u] = static_cast<std::uint16_t>(std::lround(z * 5000));
       }
     }
     WritePng16((dir / "depth" / (std::to_string(k) + ".png")).string(), depth);
@@ -281,7 +283,8 @@ TEST(IclSequence, IntrinsicsFileWithFlip) {
   WriteText(dir / "intrinsics.yaml",
             "width: 640\nheight: 480\nfx: 481.2\nfy: -480\ncx: 319.5\ncy: 239.5\n"
             "depth_scale: 5000\n");
-  EXPECT_LT(WorldPlaneResidual(OpenIclSequence(dir.string(), SensorConfig{})->Load(1), scene), 2e-3);
+  EXPECT_LT(WorldPlaneResidual(OpenIclSequence(dir.string(), SensorConfig{})->Load(1), scene),
+            2e-3);
 }
 
 TEST(IclSequence, MissingDepthNamesLine) {
@@ -309,9 +312,9 @@ TEST(SequenceFactory, SingleFramesOfEveryKind) {
   PLANESLAM_REQUIRE_DATA();
   const fs::path data = test::DataDir();
   // A TUM fr3 depth PNG with the default (fr3) intrinsics.
-  const Frame tum =
-      LoadSingleFrame((data / "depth_frames" / "tum_fr3_long_office_1341848230.910894.png").string(),
-                      SensorConfig{});
+  const Frame tum = LoadSingleFrame(
+      (data / "depth_frames" / "tum_fr3_long_office_1341848230.910894.png").string(),
+      SensorConfig{});
   EXPECT_EQ(tum.cloud.width, 640);
   EXPECT_EQ(tum.cloud.model, SensorModel::kPinhole);
   EXPECT_GT(tum.cloud.CountValid(), 100000u);
@@ -331,18 +334,22 @@ TEST(SequenceFactory, SingleFramesOfEveryKind) {
   // The tunnel PNG is in millimetres.
   SensorConfig mm;
   mm.depth_scale = 1000.0;
-  const Frame tunnel = LoadSingleFrame((data / "depth_frames" / "cape_tunnel_depth_mm.png").string(), mm);
+  const Frame tunnel =
+      LoadSingleFrame((data / "depth_frames" / "cape_tunnel_depth_mm.png").string(), mm);
   EXPECT_GT(tunnel.cloud.CountValid(), 10000u);
   // An organized PCD and a KITTI scan.
-  const Frame pcd = LoadSingleFrame((data / "organized_pcd" / "office1.pcd").string(), SensorConfig{});
+  const Frame pcd =
+      LoadSingleFrame((data / "organized_pcd" / "office1.pcd").string(), SensorConfig{});
   EXPECT_EQ(pcd.cloud.width, 640);
   EXPECT_EQ(pcd.cloud.height, 480);
-  const Frame bin = LoadSingleFrame((data / "kitti_velodyne" / "000000.bin").string(), SensorConfig{});
+  const Frame bin =
+      LoadSingleFrame((data / "kitti_velodyne" / "000000.bin").string(), SensorConfig{});
   EXPECT_EQ(bin.cloud.height, 64);
   EXPECT_EQ(bin.cloud.model, SensorModel::kSpherical);
   // Unknown extension.
-  EXPECT_NE(ErrorOf([&] { LoadSingleFrame((data / "README.md").string(), SensorConfig{}); })
-                .find("unknown file type '.md'"),
+  EXPECT_NE(ErrorOf([&] {
+              LoadSingleFrame((data / "README.md").string(), SensorConfig{});
+            }).find("unknown file type '.md'"),
             std::string::npos);
 }
 

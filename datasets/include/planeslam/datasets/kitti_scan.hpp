@@ -2,7 +2,6 @@
 /// KITTI Velodyne scans (.bin: float32 x y z reflectance per point, not organized) and their
 /// projection to an organized range image (rows by elevation, columns by azimuth).
 #include <Eigen/Core>
-
 #include <memory>
 #include <string>
 #include <vector>
@@ -24,14 +23,14 @@ std::vector<LidarPoint> ReadKittiScan(const std::string& path);
 
 /// What happened to the points of a scan during projection.
 struct RangeProjectionStats {
-  std::size_t points = 0;              ///< input points
-  std::size_t invalid = 0;             ///< non-finite or at the origin
-  std::size_t outside_elevation = 0;   ///< beyond the image's elevation range (elevation mode)
-  std::size_t outside_range = 0;       ///< beyond min/max range of the config
-  std::size_t shifted = 0;             ///< placed in a free neighbouring column (see config)
-  std::size_t collisions = 0;          ///< lost to a nearer point in the same cell
-  std::size_t placed = 0;              ///< stored in the image
-  bool used_scan_order = false;        ///< rows came from the rings of the point order
+  std::size_t points = 0;             ///< input points
+  std::size_t invalid = 0;            ///< non-finite or at the origin
+  std::size_t outside_elevation = 0;  ///< beyond the image's elevation range (elevation mode)
+  std::size_t outside_range = 0;      ///< beyond min/max range of the config
+  std::size_t shifted = 0;            ///< placed in a free neighbouring column (see config)
+  std::size_t collisions = 0;         ///< lost to a nearer point in the same cell
+  std::size_t placed = 0;             ///< stored in the image
+  bool used_scan_order = false;       ///< rows came from the rings of the point order
   double PlacedFraction() const { return points ? static_cast<double>(placed) / points : 0.0; }
 };
 

@@ -29,9 +29,9 @@ struct PcdHeader {
   std::int64_t width = 0;
   std::int64_t height = 0;
   std::int64_t points = 0;
-  std::string data;               ///< "ascii", "binary" or "binary_compressed"
-  std::size_t data_offset = 0;    ///< byte offset of the data after the DATA line
-  std::size_t point_bytes = 0;    ///< sum of size * count
+  std::string data;             ///< "ascii", "binary" or "binary_compressed"
+  std::size_t data_offset = 0;  ///< byte offset of the data after the DATA line
+  std::size_t point_bytes = 0;  ///< sum of size * count
 
   /// Index of the field called `name`, or -1.
   int FieldIndex(const std::string& name) const;
@@ -43,8 +43,8 @@ PcdHeader ParsePcdHeader(const std::string& bytes, const std::string& name);
 /// Parses a whole PCD held in memory. Coordinates are multiplied by `unit_scale` (e.g. 0.01 for
 /// centimetres). A point with any non-finite coordinate becomes NaN in all three. The cloud's
 /// model is `model`; HEIGHT 1 (unorganized) gives a width x 1 cloud.
-OrganizedCloud ParsePcd(const std::string& bytes, const std::string& name,
-                        double unit_scale = 1.0, SensorModel model = SensorModel::kPinhole);
+OrganizedCloud ParsePcd(const std::string& bytes, const std::string& name, double unit_scale = 1.0,
+                        SensorModel model = SensorModel::kPinhole);
 
 /// Reads a PCD file (see ParsePcd).
 OrganizedCloud ReadPcd(const std::string& path, double unit_scale = 1.0,

@@ -21,13 +21,14 @@ struct SensorConfig {
   /// Negate fy when back-projecting: ICL-NUIM's ground truth is expressed for a y-up camera, so
   /// its depth must be back-projected with fy < 0 for the poses to agree with the clouds.
   bool flip_y = false;
-  double max_depth = 0.0;  ///< [m] depth/range beyond this becomes invalid (NaN); 0 = no limit
-  double min_depth = 0.0;  ///< [m] depth/range below this becomes invalid (NaN)
+  double max_depth = 0.0;   ///< [m] depth/range beyond this becomes invalid (NaN); 0 = no limit
+  double min_depth = 0.0;   ///< [m] depth/range below this becomes invalid (NaN)
   double unit_scale = 1.0;  ///< PCD coordinates are multiplied by this to get metres (cm: 0.01)
   /// Grid of organized PCD files: "pinhole" (depth camera, e.g. Kinect) or "spherical" (rows =
   /// elevation, columns = azimuth: terrestrial laser scans).
   std::string pcd_model = "pinhole";
-  /// Largest |t_frame - t_groundtruth| for a ground-truth pose to be associated [s] (TUM tools: 0.02).
+  /// Largest |t_frame - t_groundtruth| for a ground-truth pose to be associated [s] (TUM tools:
+  /// 0.02).
   double gt_max_time_difference = 0.02;
   /// LiDAR (.bin) range image: rows by elevation, columns by azimuth. The HDL-64E at 10 Hz fires
   /// about 2083 times per revolution (0.1728 deg), so 2083 columns hold about one point per cell
@@ -60,8 +61,8 @@ struct SensorConfig {
 /// Camera description read from a dataset folder's intrinsics.yaml.
 struct CameraFile {
   PinholeIntrinsics intrinsics;  ///< ready for back-projection: fy < 0 when the file flips y
-  double depth_scale = 5000.0;  ///< PNG units per metre
-  bool flip_y = false;          ///< true when fy < 0 (flip_y: true, or a negative fy, in the file)
+  double depth_scale = 5000.0;   ///< PNG units per metre
+  bool flip_y = false;           ///< true when fy < 0 (flip_y: true, or a negative fy, in the file)
 };
 
 /// Parses a flat `key: value` file (# comments) with keys width height fx fy cx cy depth_scale
