@@ -18,7 +18,7 @@
 #include "planeslam/datasets/sequence_factory.hpp"
 #include "planeslam/datasets/trajectory_eval.hpp"
 #include "planeslam/datasets/trajectory_io.hpp"
-#include "planeslam/mapping/slam_system.hpp"
+#include "planeslam/registration/plane_odometry.hpp"
 #ifdef PLANESLAM_HAVE_PCL_BASELINES
 #include "pcl/baselines.hpp"
 #endif
@@ -64,21 +64,19 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
   if (options.max_frames > 0) n = std::min<std::size_t>(n, options.max_frames);
   if (n < 2) throw IoError(sequence_path, "odometry needs at least two frames");
 
-  // Ours: detector + the SLAM front end without loop closures (frame-to-keyframe plane tracking
-  // with the constant-velocity prior), online poses as they come out.
+  // Ours: detector + registration::PlaneOdometry (frame-to-frame plane association and
+  // registration with the constant-velocity prior, point-to-plane fill of degenerate directions).
   const std::string method =
       options.method.empty() ? config.Get<DetectionSection>("detection").method : options.method;
   const std::unique_ptr<detection::PlaneDetector> detector = MakeDetector(method, config);
-  mapping::SlamConfig slam_config = config.Get<mapping::SlamConfig>("slam");
-  slam_config.loop_closure = false;
-  mapping::SlamSystem slam(slam_config, config.Get<registration::AssociationConfig>("association"),
-                           config.Get<registration::RegistrationConfig>("registration"),
-                           config.Get<registration::PointToPlaneConfig>("point_to_plane"),
-                           config.Get<mapping::PoseGraphConfig>("pose_graph"),
-                           config.Get<mapping::PlaneMapConfig>("plane_map"));
+  registration::PlaneOdometryConfig odometry_config =
+      config.Get<registration::PlaneOdometryConfig>("odometry");
+  odometry_config.association = config.Get<registration::AssociationConfig>("association");
+  odometry_config.registration = config.Get<registration::RegistrationConfig>("registration");
+  odometry_config.point_to_plane = config.Get<registration::PointToPlaneConfig>("point_to_plane");
   const std::optional<Pose> first_gt = sequence->GroundTruth(0);
   const Pose T_world_first = first_gt ? *first_gt : Pose::Identity();
-  slam.SetInitialPose(T_world_first);
+  registration::PlaneOdometry odometry(odometry_config, T_world_first);
 
   OdometryRun ours;
   ours.name = "planes(" + detector->Name() + ")";
@@ -101,13 +99,13 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
 
     auto t = Clock::now();
     const detection::Segmentation segmentation = detector->Detect(frame.cloud);
-    const mapping::SlamFrameResult result =
-        slam.ProcessFrame(frame.timestamp, frame.cloud, segmentation);
+    const registration::OdometryStep step_ours =
+        odometry.Process(frame.timestamp, frame.cloud, segmentation);
     const double ours_ms = MsSince(t);
-    ours.trajectory.Add(frame.timestamp, result.T_world_sensor);
+    ours.trajectory.Add(frame.timestamp, step_ours.T_world_sensor);
     if (i > 0) {
       ours.times_ms.push_back(ours_ms);
-      if (!result.tracked) ++ours.failures;
+      if (!step_ours.registration.converged) ++ours.failures;
     }
 #ifdef PLANESLAM_HAVE_PCL_BASELINES
     const pcl_baselines::GicpStep step = gicp.Track(frame.cloud);
@@ -150,7 +148,7 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
 
   std::printf("bench odometry: %s, %zu frames, delta 1 s = %d frames (median dt %.4f s)\n",
               sequence_path.c_str(), n, second_frames, dt);
-  std::printf("ours: detector %s + plane tracking (slam front end, loop closure off)\n",
+  std::printf("ours: detector %s + PlaneOdometry (frame to frame, constant-velocity prior)\n",
               detector->Name().c_str());
 #ifdef PLANESLAM_HAVE_PCL_BASELINES
   std::printf("pcl_gicp: VoxelGrid %.3f m, max correspondence %.3f m, k=%d, %d iterations\n",
@@ -175,7 +173,7 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
                 Median(runs[1]->times_ms) / Median(runs[0]->times_ms));
   }
   std::printf(
-      "\nms/frame: median; ours = detection + association + registration, GICP = voxel grid + "
+      "\nms/frame: median; ours = detection + PlaneOdometry::Process, GICP = voxel grid + "
       "covariances + alignment.\nRPE with evo's semantics (E = inv(Q_i^-1 Q_j)(P_i^-1 P_j), "
       "association within 10 ms), translation and rotation rmse.\n");
 

@@ -38,16 +38,8 @@ void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
 std::vector<std::string> ValidateSlam(const mapping::SlamConfig& c) { return c.Validate(); }
 
 void VisitRun(FieldVisitor& v, RunConfig& c) {
-  v.Field("method", c.method, "plane detector used by 'run' (see 'planeslam detect --help')", {});
   v.Field("start_at_ground_truth", c.start_at_ground_truth,
           "anchor the first pose at the ground truth's (when known) instead of the identity");
-  v.Field("octomap", c.octomap, "write octomap.bt (needs a build with OctoMap)");
-  v.Field("octomap_resolution", c.octomap_resolution, "[m] OctoMap voxel size", 0.005, 10.0);
-  v.Field("octomap_max_range", c.octomap_max_range,
-          "[m] rays longer than this are cut (protects floors seen at grazing angles)", 0.1,
-          1000.0);
-  v.Field("octomap_downsample", c.octomap_downsample,
-          "[m] voxel size the keyframe clouds are thinned to before insertion", 0.0, 10.0);
   v.Field("max_frames", c.max_frames, "[frames] stop after this many frames (0 = all)", 0,
           100000000);
   v.Field("frame_stride", c.frame_stride, "[frames] use every n-th frame", 1, 1000);

@@ -61,10 +61,12 @@ std::vector<std::string> SlamConfig::Validate() const {
 SlamSystem::SlamSystem(const SlamConfig& config,
                        const registration::AssociationConfig& association,
                        const registration::RegistrationConfig& registration,
+                       const registration::PointToPlaneConfig& point_to_plane,
                        const PoseGraphConfig& pose_graph, const PlaneMapConfig& plane_map)
     : config_(config),
       association_config_(association),
       registration_config_(registration),
+      point_to_plane_config_(point_to_plane),
       pose_graph_config_(pose_graph),
       map_(plane_map) {
   const auto problems = config_.Validate();
@@ -82,6 +84,7 @@ void SlamSystem::AddKeyframe(std::size_t frame, const Pose& T_world_sensor,
   graph_.AddNode(keyframe.id, T_world_sensor, /*fixed=*/keyframe.id == 0);
   keyframes_.push_back(std::move(keyframe));
   keyframe_frames_.push_back(frame);
+  keyframe_cloud_ = cloud;
   ++stats_.keyframes;
   const auto start = std::chrono::steady_clock::now();
   map_.AddFrame(keyframes_.back().id, T_world_sensor, segmentation, cloud);
@@ -97,6 +100,9 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
   ++stats_.frames;
 
   if (keyframes_.empty()) {
+    if (cloud.model == datasets::SensorModel::kPinhole) {
+      intrinsics_ = registration::EstimatePinholeIntrinsics(cloud);
+    }
     AddKeyframe(result.index, T_world_first_, segmentation, cloud);
     frames_.push_back({timestamp, 0, Pose::Identity()});
     result.T_world_sensor = T_world_first_;
@@ -113,10 +119,15 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
       DiagonalCovariance(config_.prior_translation_sigma, config_.prior_rotation_sigma);
   const registration::AssociationResult association = registration::AssociatePlanes(
       keyframe.planes, segmentation.planes, prior, association_config_, registration_config_);
-  const registration::RegistrationResult& reg = association.registration;
+  registration::RegistrationResult reg = association.registration;
+  if (reg.converged && reg.degenerate && intrinsics_) {
+    result.used_point_to_plane = registration::FillDegenerateWithPointToPlane(
+        keyframe_cloud_, *intrinsics_, cloud, point_to_plane_config_, &reg);
+  }
   result.matches = static_cast<int>(reg.inliers.size());
   result.tracked = reg.converged;
   result.degenerate = reg.degenerate || !reg.converged;
+  if (result.used_point_to_plane) ++stats_.point_to_plane_frames;
   // The registration falls back to the prior itself (whole or per degenerate direction).
   const Pose T_keyframe_curr = reg.converged ? reg.T_prev_curr : prior.T_prev_curr;
   const Matrix6d covariance = reg.converged ? reg.covariance : prior.covariance;

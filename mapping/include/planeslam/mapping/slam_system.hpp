@@ -3,7 +3,8 @@
 /// closures, and the global plane map.
 ///
 /// Per frame: the detector's planes are associated with the current keyframe's planes (prior:
-/// constant velocity) and registered in closed form (registration module). The pose of a frame is
+/// constant velocity) and registered in closed form (registration module); directions the planes leave open (a
+/// corridor's axis) are filled by point-to-plane alignment of the clouds where they can be. The pose of a frame is
 /// kept relative to its keyframe (T_kf_frame), so every frame follows its keyframe when the graph
 /// is optimised. A new keyframe starts when the motion since the keyframe passes a threshold or the
 /// planes shared with it get few; it adds a node, an odometry edge weighted by the registration's
@@ -13,6 +14,7 @@
 /// robust loss), after which the graph is optimised and the map re-fitted.
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -24,6 +26,7 @@
 #include "planeslam/mapping/pose_graph.hpp"
 #include "planeslam/registration/plane_association.hpp"
 #include "planeslam/registration/plane_registration.hpp"
+#include "planeslam/registration/point_to_plane.hpp"
 
 namespace planeslam::mapping {
 
@@ -58,7 +61,8 @@ struct SlamFrameResult {
   int planes = 0;           ///< detected in the frame
   int matches = 0;          ///< planes matched with the keyframe
   bool tracked = false;     ///< the registration converged (else the prior was used)
-  bool degenerate = false;  ///< some direction came from the prior / point alignment
+  bool degenerate = false;  ///< the planes left some direction undetermined
+  bool used_point_to_plane = false;  ///< a degenerate direction was filled by point alignment
   int loop_closures = 0;    ///< verified closures added at this frame
 };
 
@@ -69,6 +73,7 @@ struct SlamStats {
   std::size_t loop_closures = 0;      ///< verified and added
   std::size_t loop_candidates = 0;    ///< tried
   std::size_t degenerate_frames = 0;
+  std::size_t point_to_plane_frames = 0;  ///< degenerate frames filled by point alignment
   std::size_t untracked_frames = 0;   ///< no usable plane registration (prior used)
   std::size_t optimizations = 0;
   double time_tracking_ms = 0.0;      ///< association + registration, total
@@ -81,6 +86,7 @@ class SlamSystem {
  public:
   SlamSystem(const SlamConfig& config, const registration::AssociationConfig& association,
              const registration::RegistrationConfig& registration,
+             const registration::PointToPlaneConfig& point_to_plane,
              const PoseGraphConfig& pose_graph, const PlaneMapConfig& plane_map);
 
   /// Processes the next frame (in time order) with its detected planes. The first frame defines
@@ -125,6 +131,11 @@ class SlamSystem {
   SlamConfig config_;
   registration::AssociationConfig association_config_;
   registration::RegistrationConfig registration_config_;
+  registration::PointToPlaneConfig point_to_plane_config_;
+  /// The current keyframe's cloud and the pinhole grid it came from, for the point-to-plane fill
+  /// of directions the planes cannot determine (none for spherical sensors).
+  datasets::OrganizedCloud keyframe_cloud_;
+  std::optional<datasets::PinholeIntrinsics> intrinsics_;
   PoseGraphConfig pose_graph_config_;
   PoseGraph graph_;
   PlaneMap map_;

@@ -1,0 +1,282 @@
+// `planeslam run [SEQUENCE]`: offline plane SLAM over a sequence (or the built-in synthetic room),
+// writing the trajectory, the plane map, the pose graph, an optional OctoMap and, with ground
+// truth, its own scores.
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <sstream>
+
+#include "cli_common.hpp"
+#include "command_registry.hpp"
+#include "config_sections_app.hpp"
+#include "config_sections_datasets.hpp"
+#include "config_sections_registration.hpp"
+#include "config_sections_mapping.hpp"
+#include "config_sections_slam.hpp"
+#include "config_sections_synthetic.hpp"
+#include "detector_factory.hpp"
+#include "interrupt.hpp"
+#include "planeslam/datasets/atomic_file.hpp"
+#include "planeslam/datasets/sequence_factory.hpp"
+#include "planeslam/datasets/trajectory_eval.hpp"
+#include "planeslam/datasets/trajectory_io.hpp"
+#include "planeslam/mapping/g2o_io.hpp"
+#include "planeslam/mapping/map_writers.hpp"
+#include "planeslam/mapping/occupancy_map.hpp"
+#include "planeslam/mapping/slam_system.hpp"
+#include "trajectory_plots.hpp"
+
+namespace planeslam::app {
+namespace {
+
+namespace ds = planeslam::datasets;
+using Clock = std::chrono::steady_clock;
+
+double MsSince(Clock::time_point t) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+nlohmann::json StatsJson(const ds::ErrorStatistics& s, std::size_t pairs) {
+  return {{"rmse", s.rmse}, {"mean", s.mean},     {"median", s.median}, {"std", s.std},
+          {"min", s.min},   {"max", s.max},       {"sse", s.sse},       {"pairs", pairs}};
+}
+
+class RunCommand : public Command {
+ public:
+  std::string Name() const override { return "run"; }
+  std::string Summary() const override {
+    return "Offline plane SLAM over a sequence (no SEQUENCE: the built-in synthetic room)";
+  }
+  int Order() const override { return 20; }
+
+  void Setup(CLI::App& sub) override {
+    sub.add_option("SEQUENCE", sequence_,
+                   "TUM or ICL-NUIM folder, folder of organized .pcd, or KITTI .bin folder; "
+                   "omitted: the synthetic scene of the 'simulation' config section");
+    sub.add_option("-o,--out", out_dir_, "output folder (default: output.directory, planeslam_out)");
+    sub.add_option("--scene", scene_, "synthetic scene when no SEQUENCE: room, corridor, rubble");
+    sub.add_option("--method", method_, "plane detector (default: detection.method)");
+    AddConfigOptions(sub, options_);
+    sub.footer(
+        "Outputs: trajectory_tum.txt trajectory_kitti.txt plane_map.{ply,obj,json} pose_graph.g2o\n"
+        "         octomap.bt (octomap.enabled) config.yaml summary.json frames.csv, and with ground truth metrics.json + "
+        "plots/*.svg\n"
+        "Ctrl-C stops after the current frame and writes the outputs of the frames done.\n\n"
+        "Examples:\n"
+        "  planeslam run                                    synthetic room with loop closure\n"
+        "  planeslam run --scene corridor --out corridor_out\n"
+        "  planeslam run ../shared/data/tum_fr3_structure_notexture_far -c config/tum_fr3.yaml\n"
+        "  planeslam run scans/ -c config/laser_scan.yaml --set octomap.enabled=false");
+  }
+
+  int Run() override {
+    Config config = LoadConfig(options_);
+    if (MaybePrintConfig(options_, config)) return 0;
+    ApplyInputLimits(config);
+    const RunConfig& run = config.Get<RunConfig>("run");
+    const std::string method =
+        method_.empty() ? config.Get<DetectionSection>("detection").method : method_;
+    const std::string out_dir =
+        out_dir_.empty() ? config.Get<OutputConfig>("output").directory : out_dir_;
+
+    // Input: a sequence folder or the synthetic scene.
+    std::unique_ptr<ds::Sequence> sequence;
+    std::string input_name;
+    if (sequence_.empty()) {
+      sequence = MakeSyntheticSequence(scene_, config);
+      input_name = "synthetic " + sequence->Name();
+    } else {
+      if (!scene_.empty()) throw ConfigError("--scene applies only without SEQUENCE");
+      sequence = ds::OpenSequence(sequence_, config.Get<ds::SensorConfig>("sensor"));
+      input_name = sequence_;
+    }
+    const std::unique_ptr<detection::PlaneDetector> detector = MakeDetector(method, config);
+    std::size_t frames = sequence->Size();
+    std::vector<std::size_t> indices;
+    for (std::size_t i = 0; i < frames; i += run.frame_stride) indices.push_back(i);
+    if (run.max_frames > 0 && indices.size() > static_cast<std::size_t>(run.max_frames)) {
+      indices.resize(run.max_frames);
+    }
+    if (indices.empty()) throw IoError(input_name, "the sequence has no frames");
+
+    mapping::SlamSystem slam(config.Get<mapping::SlamConfig>("slam"),
+                             config.Get<registration::AssociationConfig>("association"),
+                             config.Get<registration::RegistrationConfig>("registration"),
+                             config.Get<registration::PointToPlaneConfig>("point_to_plane"),
+                             config.Get<mapping::PoseGraphConfig>("pose_graph"),
+                             config.Get<mapping::PlaneMapConfig>("plane_map"));
+    if (run.start_at_ground_truth) {
+      if (auto gt = sequence->GroundTruth(indices.front())) slam.SetInitialPose(*gt);
+    }
+    const mapping::OccupancyMapConfig& octomap_config =
+        config.Get<mapping::OccupancyMapConfig>("octomap");
+    const bool want_octomap = octomap_config.enabled && mapping::OccupancyMapBuilder::available();
+
+    std::cerr << "planeslam run: " << input_name << ", " << indices.size() << " frames, detector "
+              << detector->Name() << "\n";
+    InstallInterruptHandlers();
+    ProgressBar progress("run", indices.size(), options_.quiet);
+    double time_load = 0, time_detect = 0;
+    std::vector<std::pair<std::int64_t, std::vector<Eigen::Vector3f>>> keyframe_clouds;
+    ds::Trajectory ground_truth;
+    std::ostringstream frame_log;  // frames.csv: what the tracker did with each frame
+    frame_log << "index,timestamp,keyframe,planes,matches,tracked,degenerate,point_to_plane,"
+                 "loop_closures\n";
+    std::size_t done = 0;
+    const auto wall_start = Clock::now();
+    for (std::size_t i : indices) {
+      if (StopRequested()) break;
+      auto t = Clock::now();
+      const ds::Frame frame = sequence->Load(i);
+      time_load += MsSince(t);
+      t = Clock::now();
+      const detection::Segmentation segmentation = detector->Detect(frame.cloud);
+      time_detect += MsSince(t);
+      const mapping::SlamFrameResult result =
+          slam.ProcessFrame(frame.timestamp, frame.cloud, segmentation);
+      if (frame.T_world_sensor_gt) ground_truth.Add(frame.timestamp, *frame.T_world_sensor_gt);
+      frame_log << i << "," << ds::FormatRoundTrip(frame.timestamp) << "," << result.keyframe
+                << "," << result.planes << "," << result.matches << "," << result.tracked << ","
+                << result.degenerate << "," << result.used_point_to_plane << ","
+                << result.loop_closures << "\n";
+      if (want_octomap && result.keyframe) {
+        // Thinned now, inserted at the end with the optimised keyframe poses.
+        keyframe_clouds.emplace_back(
+            static_cast<std::int64_t>(slam.stats().keyframes - 1),
+            mapping::VoxelDownsample(frame.cloud.points, octomap_config.downsample_voxel));
+      }
+      progress.Update(++done);
+    }
+    progress.Finish();
+    const bool interrupted = done < indices.size();
+    if (done == 0) throw IoError(input_name, "interrupted before the first frame: nothing written");
+
+    auto t = Clock::now();
+    const mapping::PoseGraphResult final_optimization = slam.Finish();
+    const double time_finish = MsSince(t);
+    const double wall_seconds = std::chrono::duration<double>(Clock::now() - wall_start).count();
+
+    // Everything is computed before the first file is written; each file is written atomically.
+    t = Clock::now();
+    EnsureDirectory(out_dir);
+    const ds::Trajectory estimate = slam.EstimatedTrajectory();
+    ds::WriteTumTrajectory(out_dir + "/trajectory_tum.txt", estimate);
+    ds::WriteKittiTrajectory(out_dir + "/trajectory_kitti.txt", estimate);
+    const auto records = mapping::MakeMapRecords(slam.map());
+    mapping::WritePlaneMapPly(out_dir + "/plane_map.ply", records);
+    mapping::WritePlaneMapObj(out_dir + "/plane_map.obj", records);
+    mapping::WritePlaneMapJson(out_dir + "/plane_map.json", records);
+    mapping::WriteG2o(slam.graph(), out_dir + "/pose_graph.g2o");
+    ds::WriteFileAtomic(out_dir + "/config.yaml", config.ToYaml(true));
+    ds::WriteFileAtomic(out_dir + "/frames.csv", frame_log.str());
+    if (want_octomap) {
+      mapping::OccupancyMapConfig thinned = octomap_config;
+      thinned.downsample_voxel = 0.0;  // already thinned per keyframe
+      mapping::OccupancyMapBuilder octomap(thinned);
+      const auto poses = slam.KeyframePoses();
+      for (const auto& [id, points] : keyframe_clouds) octomap.Insert(points, poses.at(id));
+      octomap.Write(out_dir + "/octomap.bt");
+    }
+    nlohmann::json metrics;
+    std::string ate_line = "no ground truth";
+    if (ground_truth.size() >= 3) {
+      metrics = Score(ground_truth, estimate, run, out_dir);
+      std::ostringstream os;
+      os << "ATE rmse " << metrics["ate"]["rmse"].get<double>() * 100.0 << " cm (SE(3) aligned, "
+         << metrics["ate"]["pairs"].get<std::size_t>() << " pairs)";
+      ate_line = os.str();
+    }
+    const mapping::SlamStats& stats = slam.stats();
+    nlohmann::json summary = {
+        {"input", input_name},
+        {"frames", done},
+        {"interrupted", interrupted},
+        {"keyframes", stats.keyframes},
+        {"loop_closures", stats.loop_closures},
+        {"loop_candidates", stats.loop_candidates},
+        {"degenerate_frames", stats.degenerate_frames},
+        {"point_to_plane_frames", stats.point_to_plane_frames},
+        {"untracked_frames", stats.untracked_frames},
+        {"map_planes", slam.map().size()},
+        {"final_optimization",
+         {{"initial_cost", final_optimization.initial_cost},
+          {"final_cost", final_optimization.final_cost},
+          {"iterations", final_optimization.iterations},
+          {"converged", final_optimization.converged}}},
+        {"time_ms",
+         {{"load", time_load},
+          {"detect", time_detect},
+          {"track", stats.time_tracking_ms},
+          {"map", stats.time_map_ms},
+          {"loop", stats.time_loop_ms},
+          {"optimize", stats.time_optimize_ms + time_finish},
+          {"write", MsSince(t)}}},
+        {"frames_per_second", done / std::max(wall_seconds, 1e-9)}};
+    if (!metrics.is_null()) summary["metrics"] = metrics;
+    ds::WriteFileAtomic(out_dir + "/summary.json", summary.dump(2) + "\n");
+    if (!metrics.is_null()) ds::WriteFileAtomic(out_dir + "/metrics.json", metrics.dump(2) + "\n");
+
+    std::printf("%s%zu frames (%.1f frames/s), %zu keyframes, %zu loop closures, %zu map planes\n",
+                interrupted ? "INTERRUPTED: outputs cover the frames processed: " : "", done,
+                done / std::max(wall_seconds, 1e-9), stats.keyframes, stats.loop_closures,
+                slam.map().size());
+    std::printf(
+        "degenerate frames %zu (filled by point-to-plane alignment: %zu), untracked frames %zu\n",
+        stats.degenerate_frames, stats.point_to_plane_frames, stats.untracked_frames);
+    std::printf("%s\n", ate_line.c_str());
+    std::printf(
+        "time per frame [ms]: load %.2f detect %.2f track %.2f map %.2f loop %.2f; "
+        "optimise %.1f ms total\n",
+        time_load / done, time_detect / done, stats.time_tracking_ms / done,
+        stats.time_map_ms / done, stats.time_loop_ms / done, stats.time_optimize_ms + time_finish);
+    std::printf("outputs in %s/\n", out_dir.c_str());
+    return interrupted ? 130 : 0;
+  }
+
+ private:
+  /// ATE (evo association, SE(3) Umeyama alignment) and RPE (evo, delta 1 frame) against the
+  /// ground truth, plus plots.
+  nlohmann::json Score(const ds::Trajectory& ground_truth, const ds::Trajectory& estimate,
+                       const RunConfig& run, const std::string& out_dir) {
+    ds::ApeOptions ape_options;
+    ape_options.association.max_diff = run.ate_max_time_difference;
+    ape_options.alignment.align = true;
+    const ds::ApeResult ape = ds::EvaluateApe(ground_truth, estimate, ape_options,
+                                              "ground truth", "trajectory_tum.txt");
+    nlohmann::json metrics;
+    if (!ape.ok) return {{"error", ape.message}};
+    metrics["ate"] = StatsJson(ape.stats, ape.pairs.size());
+    metrics["ate"]["alignment"] = "SE(3) Umeyama (evo -a)";
+    ds::RpeOptions rpe_options;
+    rpe_options.association.max_diff = run.ate_max_time_difference;
+    rpe_options.delta = 1.0;
+    rpe_options.delta_unit = ds::DeltaUnit::kFrames;
+    const ds::RpeResult rpe_t = ds::EvaluateRpe(ground_truth, estimate, rpe_options);
+    rpe_options.relation = ds::PoseRelation::kRotationAngleDeg;
+    const ds::RpeResult rpe_r = ds::EvaluateRpe(ground_truth, estimate, rpe_options);
+    if (rpe_t.ok) metrics["rpe_translation_m_per_frame"] = StatsJson(rpe_t.stats, rpe_t.errors.size());
+    if (rpe_r.ok) metrics["rpe_rotation_deg_per_frame"] = StatsJson(rpe_r.stats, rpe_r.errors.size());
+    EnsureDirectory(out_dir + "/plots");
+    PlotTrajectories(out_dir + "/plots/trajectories.svg",
+                     "planeslam run: trajectories, top view (SE(3) aligned)", ape.ref_poses,
+                     ape.est_poses, ape.est_poses, ape.errors, "ATE [m]");
+    PlotErrorOverTime(out_dir + "/plots/ate_over_time.svg", "ATE over time (SE(3) aligned)",
+                      ape.stamps, ape.errors, ape.stats, "ATE [m]");
+    return metrics;
+  }
+
+  std::string sequence_;
+  std::string out_dir_;
+  std::string scene_;
+  std::string method_;
+  ConfigOptions options_;
+};
+
+PLANESLAM_REGISTER_COMMAND(RunCommand);
+
+}  // namespace
+}  // namespace planeslam::app
