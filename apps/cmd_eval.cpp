@@ -138,6 +138,10 @@ class EvalCommand : public Command {
     sub.add_option("--json", json_path_, "also write the results as JSON to this file");
     sub.add_option("--plot", plot_dir_,
                    "write SVG plots (trajectories top view, error over time, error per pair) here");
+    sub.add_option("--duplicates", duplicates_,
+                   "repeated stamps: error (default), first or last (keep that pose, with a "
+                   "warning; --tum defaults to last as the TUM tools, evo's search uses the first)")
+        ->check(CLI::IsMember({"error", "first", "last"}));
     sub.add_flag("-q,--quiet", quiet_, "no warnings on stderr");
     sub.footer(
         "Defaults follow evo (no alignment, 0.01 s association, RPE delta 1 frame, consecutive\n"
@@ -156,9 +160,14 @@ class EvalCommand : public Command {
   int Run() override {
     const ds::TrajectoryReadOptions read_options = [&] {
       ds::TrajectoryReadOptions o;
-      // Real ground truths repeat stamps (TUM fr2/desk); keep what each tool effectively uses.
-      o.duplicates = tum_ ? ds::TrajectoryReadOptions::Duplicates::kKeepLast
-                          : ds::TrajectoryReadOptions::Duplicates::kKeepFirst;
+      // Real ground truths repeat stamps (TUM fr2/desk has one). An error by default; --tum keeps
+      // the last as the TUM tools do (a Python dict); --duplicates chooses explicitly.
+      std::string policy = duplicates_;
+      if (policy.empty()) policy = tum_ ? "last" : "error";
+      o.duplicates = policy == "last"    ? ds::TrajectoryReadOptions::Duplicates::kKeepLast
+                     : policy == "first" ? ds::TrajectoryReadOptions::Duplicates::kKeepFirst
+                                         : ds::TrajectoryReadOptions::Duplicates::kError;
+      o.duplicate_hint = "; --duplicates first|last keeps one";
       return o;
     }();
     ds::TrajectoryReadReport report;
@@ -431,7 +440,7 @@ class EvalCommand : public Command {
   std::size_t max_pairs_ = 10000;
   double scale_ = 1.0;
   std::uint32_t seed_ = 0;
-  std::string json_path_, plot_dir_;
+  std::string json_path_, plot_dir_, duplicates_;
   bool quiet_ = false;
 };
 

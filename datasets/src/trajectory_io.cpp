@@ -93,7 +93,8 @@ bool CheckStampOrder(const std::string& path, long line, const Trajectory& traje
   if (stamp == previous) {
     if (options.duplicates == TrajectoryReadOptions::Duplicates::kError) {
       throw IoError(path, line,
-                    "duplicate timestamp " + FormatRoundTrip(stamp) + " (stamps must be unique)");
+                    "duplicate timestamp " + FormatRoundTrip(stamp) + " (stamps must be unique)" +
+                        options.duplicate_hint);
     }
     duplicate_lines->push_back(line);
     return options.duplicates == TrajectoryReadOptions::Duplicates::kKeepLast;

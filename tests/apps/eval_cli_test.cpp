@@ -172,6 +172,17 @@ TEST(EvalCli, BadFileGivesOneLineAndExitCode2) {
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_EQ(r.err, "planeslam: error: " + unsorted +
                        ":2: timestamp 1 is before the previous one (2): stamps must be sorted\n");
+  // A repeated stamp is an error naming the line, unless a policy is chosen.
+  const std::string dup = WriteText(dir, "dup.txt", "1 0 0 0 0 0 0 1\n1 5 0 0 0 0 0 1\n");
+  r = RunEval("ape " + dup + " " + good, dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.err, "planeslam: error: " + dup +
+                       ":2: duplicate timestamp 1 (stamps must be unique); --duplicates "
+                       "first|last keeps one\n");
+  r = RunEval("ape " + dup + " " + good + " --duplicates last", dir);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(Contains(r.out, "       max\t5.000000\n")) << r.out;  // kept (5, 0, 0) vs (0, 0, 0)
+  EXPECT_TRUE(Contains(r.err, "kept the last pose")) << r.err;
   // Collinear positions cannot be aligned: a clear message, not a wrong number.
   std::ostringstream line;
   for (int i = 0; i < 5; ++i) line << i << " " << i << " 0 0 0 0 0 1\n";

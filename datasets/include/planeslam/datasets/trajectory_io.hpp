@@ -41,6 +41,8 @@ struct TrajectoryReadOptions {
   /// evo's nearest-stamp search uses the first.
   enum class Duplicates { kError, kKeepFirst, kKeepLast };
   Duplicates duplicates = Duplicates::kError;
+  /// Appended to the duplicate-stamp error (an app names its option for choosing a policy).
+  std::string duplicate_hint;
 };
 
 /// Non-fatal findings of a reader (normalised rotations), for the app to print.
