@@ -228,6 +228,19 @@ TEST(MapWriters, UnwritablePathThrowsIoErrorNamingIt) {
   EXPECT_THROW(WritePlaneMapJson(path, Records()), IoError);
 }
 
+TEST(MapWriters, SameRecordsGiveIdenticalFiles) {
+  const auto dir = test::ScratchDir();
+  for (const char* name : {"a", "b"}) {
+    const std::string base = (dir / name).string();
+    WritePlaneMapPly(base + ".ply", Records());
+    WritePlaneMapObj(base + ".obj", Records());
+    WritePlaneMapJson(base + ".json", Records());
+  }
+  for (const char* ext : {".ply", ".obj", ".json"}) {
+    EXPECT_EQ(ReadAll(dir / (std::string("a") + ext)), ReadAll(dir / (std::string("b") + ext)));
+  }
+}
+
 TEST(MapWriters, PlaneColorsAreDeterministicAndDistinct) {
   std::set<Rgb8> seen;
   for (int id = 1; id <= 30; ++id) {

@@ -119,6 +119,22 @@ TEST(OccupancyMap, RaysBeyondMaxRangeOnlyClearUpToIt) {
   EXPECT_EQ(builder.Stats().occupied_leaves, 0u);
 }
 
+TEST(OccupancyMap, OrganizedCloudInsertSkipsInvalidPixels) {
+  if (!OccupancyMapBuilder::available()) GTEST_SKIP() << "built without OctoMap";
+  // A 100 x 100 cloud of the wall at z = 2, every other row invalid (NaN).
+  datasets::OrganizedCloud cloud(100, 100);
+  for (int r = 0; r < 100; r += 2) {
+    for (int c = 0; c < 100; ++c)
+      cloud.at(r, c) = Eigen::Vector3f(-1.0f + 0.02f * c, -1.0f + 0.02f * r, 2.0f);
+  }
+  OccupancyMapBuilder builder;
+  builder.Insert(cloud, SomePose());
+  // 5 cm voxels over the 2 x 2 m wall: 40 x 40 voxels (rows every 4 cm still reach every voxel
+  // row).
+  EXPECT_EQ(builder.Stats().inserted_points, 40u * 40u);
+  EXPECT_EQ(builder.Query(SomePose() * Eigen::Vector3d(0.1, 0.1, 2.0)), Occupancy::kOccupied);
+}
+
 TEST(OccupancyMap, LoadRejectsOtherFiles) {
   if (!OccupancyMapBuilder::available()) GTEST_SKIP() << "built without OctoMap";
   const auto dir = test::ScratchDir();

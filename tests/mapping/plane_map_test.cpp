@@ -416,6 +416,30 @@ TEST(PlaneMap, RefitWithCorrectedPosesMergesDuplicatesFromDrift) {
   EXPECT_EQ(map.planes()[0].observations.size(), 6u);
 }
 
+TEST(PlaneMap, SameInputGivesTheSameMap) {
+  const auto rects = Room();
+  const auto poses = RoomPoses();
+  std::vector<MapPlaneOutline> outlines[2];
+  std::vector<MapPlane> planes[2];
+  for (int run = 0; run < 2; ++run) {
+    std::mt19937 rng(11);
+    PlaneMap map;
+    for (std::size_t k = 0; k < poses.size(); ++k) {
+      const SimFrame f = Simulate(rects, 0.03, poses[k], Visible, 0.005, rng);
+      map.AddObservations(static_cast<std::int64_t>(k), poses[k], f.planes, f.points);
+    }
+    planes[run] = map.planes();
+    outlines[run] = map.Outlines();
+  }
+  ASSERT_EQ(planes[0].size(), planes[1].size());
+  for (std::size_t i = 0; i < planes[0].size(); ++i) {
+    EXPECT_EQ(planes[0][i].id, planes[1][i].id);
+    EXPECT_EQ(planes[0][i].normal, planes[1][i].normal);  // bit-identical
+    EXPECT_EQ(planes[0][i].d, planes[1][i].d);
+    EXPECT_EQ(outlines[0][i].vertices, outlines[1][i].vertices);
+  }
+}
+
 TEST(PlaneMap, AddFrameTakesPointsFromTheLabelImage) {
   // An 80 x 60 cloud: left half on the plane z = 2, right half on z = 3 (two labels), an invalid
   // pixel in each.
