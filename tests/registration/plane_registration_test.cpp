@@ -122,6 +122,7 @@ TEST(PlaneRegistration, CovarianceMatchesTheErrorDistribution) {
   RegistrationConfig config;
   config.min_normal_sigma = 0.0;  // the test's noise is exactly what the covariances say
   config.min_offset_sigma = 0.0;
+  config.covariance_scale = 1.0;
   const int trials = 500;
   double sum_m2 = 0.0;
   int below_95 = 0;

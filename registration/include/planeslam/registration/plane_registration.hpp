@@ -45,7 +45,10 @@ struct RegistrationConfig {
   /// Same for the plane offset [m].
   double min_offset_sigma = 0.005;
   /// Multiplies the planes' own covariances (>1 when the detector is overconfident) [-].
-  double covariance_scale = 1.0;
+  /// 4 (sigma x2) measured on TUM fr3 structure_notexture_far with GBRG: the chi^2 verification
+  /// then keeps ~6.7 instead of ~5.7 matches a frame and the 1 s RPE over the 252 frames drops
+  /// from 7.0 cm / 3.9 deg to 3.5 cm / 1.3 deg.
+  double covariance_scale = 4.0;
   /// Per-point noise assumed when a plane carries no covariance (all zero) and its MSE is
   /// smaller [m].
   double fallback_point_sigma = 0.005;
