@@ -184,6 +184,11 @@ class DetectCommand : public Command {
 
     const auto t0 = Clock::now();
     const ds::Frame frame = ds::LoadSingleFrame(input_, sensor);
+    // A frame without a single measurement is a broken input for `detect` (the detectors
+    // themselves return no planes for it, as `run` needs on a dropped frame).
+    if (frame.cloud.CountValid() == 0) {
+      throw IoError(input_, "no valid points (every pixel is invalid or out of range)");
+    }
     const auto t1 = Clock::now();
     const detection::Segmentation seg = detector->Detect(frame.cloud);
     const auto t2 = Clock::now();
