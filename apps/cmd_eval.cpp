@@ -15,6 +15,7 @@
 #include "planeslam/datasets/trajectory_eval.hpp"
 #include "planeslam/datasets/trajectory_io.hpp"
 #include "svg_plot.hpp"
+#include "trajectory_plots.hpp"
 
 namespace planeslam::app {
 namespace {
@@ -26,12 +27,6 @@ std::string PyFloat(double v) {
   std::string s = ds::FormatRoundTrip(v);
   if (s.find_first_of(".eEn") == std::string::npos) s += ".0";
   return s;
-}
-
-std::string Fixed6(double v) {
-  char buffer[64];
-  std::snprintf(buffer, sizeof(buffer), "%.6f", v);
-  return buffer;
 }
 
 /// evo's Result.pretty_str: sorted statistic names right-aligned to 10, a tab, six decimals.
@@ -66,23 +61,6 @@ std::string TumStatsBlock(const std::string& prefix, const ds::ErrorStatistics& 
 nlohmann::json StatsJson(const ds::ErrorStatistics& s) {
   return {{"rmse", s.rmse}, {"mean", s.mean}, {"median", s.median}, {"std", s.std},
           {"min", s.min},   {"max", s.max},   {"sse", s.sse},       {"pairs", s.count}};
-}
-
-/// At most `max_points` evenly spread samples of a polyline (20k-pose ground truths in a plot).
-std::vector<std::size_t> Decimate(std::size_t n, std::size_t max_points) {
-  std::vector<std::size_t> ids;
-  const std::size_t step = n > max_points ? (n + max_points - 1) / max_points : 1;
-  for (std::size_t i = 0; i < n; i += step) ids.push_back(i);
-  if (n > 0 && ids.back() != n - 1) ids.push_back(n - 1);
-  return ids;
-}
-
-void XY(const std::vector<Pose>& poses, std::vector<double>& x, std::vector<double>& y,
-        std::size_t max_points = 5000) {
-  for (std::size_t i : Decimate(poses.size(), max_points)) {
-    x.push_back(poses[i].translation().x());
-    y.push_back(poses[i].translation().y());
-  }
 }
 
 class EvalCommand : public Command {
@@ -386,43 +364,6 @@ class EvalCommand : public Command {
     }
     WriteJson(j);
     return 0;
-  }
-
-  static void AddStatLines(SvgPlot& plot, const ds::ErrorStatistics& s) {
-    LineStyle rmse{CycleColor(3), 1.5, false}, mean{CycleColor(2), 1.5, true},
-        median{CycleColor(1), 1.5, true};
-    plot.AddHorizontalLine(s.rmse, rmse, "rmse " + Fixed6(s.rmse));
-    plot.AddHorizontalLine(s.mean, mean, "mean " + Fixed6(s.mean));
-    plot.AddHorizontalLine(s.median, median, "median " + Fixed6(s.median));
-  }
-
-  static void PlotTrajectories(const std::string& path, const std::string& title,
-                               const std::vector<Pose>& ref, const std::vector<Pose>& est,
-                               const std::vector<Pose>& coloured, const std::vector<double>& errors,
-                               const std::string& label) {
-    SvgPlot plot(title, "x [m]", "y [m]");
-    plot.SetSize(900, 700);
-    plot.SetEqualAspect(true);
-    std::vector<double> rx, ry, ex, ey, cx, cy;
-    XY(ref, rx, ry);
-    XY(est, ex, ey);
-    XY(coloured, cx, cy, coloured.size());
-    plot.AddLine(rx, ry, LineStyle{SvgColor{80, 80, 80}, 1.5, true}, "reference");
-    plot.AddLine(ex, ey, LineStyle{SvgColor{190, 190, 190}, 1.0, false}, "estimate");
-    plot.AddColorMappedScatter(cx, cy, errors, label);
-    plot.Write(path);
-  }
-
-  static void PlotErrorOverTime(const std::string& path, const std::string& title,
-                                const std::vector<double>& stamps,
-                                const std::vector<double>& errors, const ds::ErrorStatistics& stats,
-                                const std::string& label) {
-    SvgPlot plot(title, "t - t0 [s]", label);
-    std::vector<double> t(stamps.size());
-    for (std::size_t i = 0; i < stamps.size(); ++i) t[i] = stamps[i] - stamps.front();
-    plot.AddLine(t, errors, LineStyle{CycleColor(7), 1.2, false}, "error");
-    AddStatLines(plot, stats);
-    plot.Write(path);
   }
 
   std::string metric_, ref_path_, est_path_, format_, ref_times_, est_times_;

@@ -2,7 +2,6 @@
 // output layout on a hand-computed case, JSON and SVG outputs, and one-line errors with exit
 // code 2.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <algorithm>
 #include <cmath>
@@ -13,41 +12,19 @@
 #include <sstream>
 #include <string>
 
+#include "cli_support.hpp"
 #include "svg_plot.hpp"
 #include "test_support.hpp"
 
 namespace planeslam::app {
 namespace {
 
-struct CliResult {
-  int exit_code = -1;
-  std::string out, err;
-};
-
-std::string Slurp(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using test::CliResult;
+using test::Slurp;
+using test::WriteText;
 
 CliResult RunEval(const std::string& args, const std::filesystem::path& dir) {
-  const std::filesystem::path out = dir / "stdout.txt", err = dir / "stderr.txt";
-  const std::string command =
-      std::string(PLANESLAM_BIN) + " eval " + args + " >" + out.string() + " 2>" + err.string();
-  const int status = std::system(command.c_str());
-  CliResult r;
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.out = Slurp(out);
-  r.err = Slurp(err);
-  return r;
-}
-
-std::string WriteText(const std::filesystem::path& dir, const std::string& name,
-                      const std::string& text) {
-  const std::string path = (dir / name).string();
-  std::ofstream(path) << text;
-  return path;
+  return test::RunCli("eval " + args, dir);
 }
 
 std::string Data(const std::string& name) {
