@@ -165,7 +165,8 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
         if (owner < 0 && ws.visited[c]) continue;  // in R': left PCD (Algorithm 1 line 3)
         const Eigen::Vector3f& pcf = pts[c];
         const double zc = internal::PointDepth(pcf, spherical);
-        if ((pcf - pq).norm() >= params_.Delta(zc)) continue;  // dis(GR, p_c) < delta
+        const double delta_c = params_.Delta(zc);
+        if ((pcf - pq).squaredNorm() >= delta_c * delta_c) continue;  // dis(GR, p_c) < delta
         const Eigen::Vector3d pc = pcf.cast<double>();
         MomentSums merged = region;
         merged.Add(pc.x(), pc.y(), pc.z(), ws.rel2[c]);
@@ -175,6 +176,7 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
           if (!depth_model) return params_.gamma;
           const double tilt = std::min(1.0, m.NormalTilt(f.l2));
           const double sn = std::sqrt(ws.rel2[c]) * std::abs(f.normal.dot(pc));
+          if (tilt <= 0.02) return params_.Gamma(sn);  // a sharp normal: no lever-arm term
           const Eigen::Vector3d diff = pc - f.centroid;
           const double off = f.normal.dot(diff);
           const double lateral = std::sqrt(std::max(0.0, diff.squaredNorm() - off * off));
