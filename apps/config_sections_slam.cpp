@@ -16,6 +16,13 @@ void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
           "[m] 1-sigma of the constant-velocity prediction per frame", 1e-6, 100.0);
   v.Field("prior_rotation_sigma", c.prior_rotation_sigma,
           "[rad] 1-sigma of the constant-velocity prediction per frame", 1e-6, 10.0);
+  v.Field("prior_gate_chi2", c.prior_gate_chi2,
+          "[-] refuse a tracking result this far (chi-square, 6 dof) from the prior; 0 = off", 0.0,
+          1e12);
+  v.Field("prior_gate_max_refusals", c.prior_gate_max_refusals,
+          "[frames] accept the result anyway after this many refusals in a row", 0, 1000000);
+  v.Field("hold_velocity_when_degenerate", c.hold_velocity_when_degenerate,
+          "keep the last well-determined velocity on degenerate frames");
   v.Field("loop_closure", c.loop_closure, "search and verify loop closures");
   v.Field("loop_search_radius", c.loop_search_radius,
           "[m] loop candidates are keyframes within this distance", 0.0, 1000.0);

@@ -128,14 +128,33 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
   result.tracked = reg.converged;
   result.degenerate = reg.degenerate || !reg.converged;
   if (result.used_point_to_plane) ++stats_.point_to_plane_frames;
+  if (reg.converged && config_.prior_gate_chi2 > 0) {
+    // Innovation of the result against the constant-velocity prediction.
+    const Vector6d delta = registration::BoxMinus(reg.T_prev_curr, prior.T_prev_curr);
+    const Matrix6d s = prior.covariance + reg.covariance;
+    const double chi2 = delta.dot(s.ldlt().solve(delta));
+    if (!(chi2 <= config_.prior_gate_chi2) &&
+        consecutive_refusals_ < config_.prior_gate_max_refusals) {
+      result.refused = true;
+      result.tracked = false;
+      result.degenerate = true;
+      ++consecutive_refusals_;
+      ++stats_.refused_frames;
+    } else {
+      consecutive_refusals_ = 0;
+    }
+  }
   // The registration falls back to the prior itself (whole or per degenerate direction).
-  const Pose T_keyframe_curr = reg.converged ? reg.T_prev_curr : prior.T_prev_curr;
-  const Matrix6d covariance = reg.converged ? reg.covariance : prior.covariance;
+  const bool use_registration = reg.converged && !result.refused;
+  const Pose T_keyframe_curr = use_registration ? reg.T_prev_curr : prior.T_prev_curr;
+  const Matrix6d covariance = use_registration ? reg.covariance : prior.covariance;
   stats_.time_tracking_ms += ElapsedMs(track_start);
-  if (!reg.converged) ++stats_.untracked_frames;
+  if (!use_registration) ++stats_.untracked_frames;
   if (result.degenerate) ++stats_.degenerate_frames;
 
-  velocity_ = T_keyframe_last_.inverse() * T_keyframe_curr;
+  if (!(result.degenerate && config_.hold_velocity_when_degenerate)) {
+    velocity_ = T_keyframe_last_.inverse() * T_keyframe_curr;
+  }
   T_keyframe_last_ = T_keyframe_curr;
   result.T_world_sensor = KeyframePose(keyframe.id) * T_keyframe_curr;
 

@@ -36,8 +36,21 @@ struct SlamConfig {
   double keyframe_rotation_deg = 12.0;  ///< [deg] same for rotation
   int keyframe_min_matches = 3;  ///< [planes] new keyframe when fewer planes match the keyframe
   /// Prior covariance of the constant-velocity prediction, per frame: 1 sigma [m] and [rad].
-  double prior_translation_sigma = 0.05;
-  double prior_rotation_sigma = 0.05;
+  /// Constant velocity holds to ~1 cm / 0.5 deg per frame at 30 Hz for handheld and simulated
+  /// cameras; a looser prior lets wrong associations of 3-4 planes through the gate below.
+  double prior_translation_sigma = 0.015;
+  double prior_rotation_sigma = 0.015;
+  /// A tracking result whose correction to the prior has a chi-square (6 dof, prior + result
+  /// covariance) above this is refused as a wrong association and the prior used; 22.46 is the
+  /// 99.9% quantile of chi^2(6). 0 disables the gate.
+  double prior_gate_chi2 = 22.46;
+  /// After this many refused frames in a row the result is accepted anyway (the prior, not the
+  /// planes, is then the likelier culprit) [frames].
+  int prior_gate_max_refusals = 3;
+  /// Keep the last well-determined velocity on degenerate frames instead of re-estimating it
+  /// from a result whose open directions came from the prior itself (feedback: a bias there
+  /// grows frame after frame).
+  bool hold_velocity_when_degenerate = true;
   bool loop_closure = true;             ///< search and verify loop closures
   double loop_search_radius = 1.5;      ///< [m] candidate keyframes within this distance
   double loop_max_angle_deg = 60.0;     ///< [deg] and viewing directions within this angle
@@ -64,6 +77,7 @@ struct SlamFrameResult {
   bool degenerate = false;  ///< the planes left some direction undetermined
   bool used_point_to_plane = false;  ///< a degenerate direction was filled by point alignment
   int loop_closures = 0;    ///< verified closures added at this frame
+  bool refused = false;     ///< the result contradicted the motion prior and was not used
 };
 
 /// Summary counters of a run.
@@ -75,6 +89,7 @@ struct SlamStats {
   std::size_t degenerate_frames = 0;
   std::size_t point_to_plane_frames = 0;  ///< degenerate frames filled by point alignment
   std::size_t untracked_frames = 0;   ///< no usable plane registration (prior used)
+  std::size_t refused_frames = 0;     ///< registration refused by the prior gate (prior used)
   std::size_t optimizations = 0;
   double time_tracking_ms = 0.0;      ///< association + registration, total
   double time_loop_ms = 0.0;          ///< loop-closure search and verification, total
@@ -145,6 +160,7 @@ class SlamSystem {
   Pose T_world_first_ = Pose::Identity();
   Pose velocity_ = Pose::Identity();  ///< T_prev_curr of the last two frames
   Pose T_keyframe_last_ = Pose::Identity();
+  int consecutive_refusals_ = 0;
   SlamStats stats_;
 };
 
