@@ -1,6 +1,4 @@
 // `planeslam detect INPUT --out DIR`: planes of one range image (depth PNG or organized PCD).
-#include <nlohmann/json.hpp>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -9,6 +7,7 @@
 #include <filesystem>
 #include <iostream>
 #include <limits>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -39,12 +38,36 @@ void PlaneColour(int id, std::uint8_t rgb[3]) {
   const double f = h - i, p = v * (1 - s), q = v * (1 - s * f), t = v * (1 - s * (1 - f));
   double r, g, b;
   switch (i % 6) {
-    case 0: r = v; g = t; b = p; break;
-    case 1: r = q; g = v; b = p; break;
-    case 2: r = p; g = v; b = t; break;
-    case 3: r = p; g = q; b = v; break;
-    case 4: r = t; g = p; b = v; break;
-    default: r = v; g = p; b = q; break;
+    case 0:
+      r = v;
+      g = t;
+      b = p;
+      break;
+    case 1:
+      r = q;
+      g = v;
+      b = p;
+      break;
+    case 2:
+      r = p;
+      g = v;
+      b = t;
+      break;
+    case 3:
+      r = p;
+      g = q;
+      b = v;
+      break;
+    case 4:
+      r = t;
+      g = p;
+      b = v;
+      break;
+    default:
+      r = v;
+      g = p;
+      b = q;
+      break;
   }
   rgb[0] = static_cast<std::uint8_t>(std::lround(255 * r));
   rgb[1] = static_cast<std::uint8_t>(std::lround(255 * g));
@@ -126,7 +149,8 @@ nlohmann::json PlanesJson(const std::string& input, const std::string& method,
     jp["eigenvalues"] = {p.eigenvalues.x(), p.eigenvalues.y(), p.eigenvalues.z()};
     nlohmann::json cov = nlohmann::json::array();
     for (int r = 0; r < 4; ++r) {
-      cov.push_back({p.covariance(r, 0), p.covariance(r, 1), p.covariance(r, 2), p.covariance(r, 3)});
+      cov.push_back(
+          {p.covariance(r, 0), p.covariance(r, 1), p.covariance(r, 2), p.covariance(r, 3)});
     }
     jp["covariance"] = cov;  // of (n_x, n_y, n_z, d), rank 3
     j["planes"].push_back(jp);
@@ -162,7 +186,8 @@ class DetectCommand : public Command {
         "config/detection_kinect.yaml --out det --method point\n"
         "  planeslam detect scan000.pcd --config config/laser_scan.yaml --config "
         "config/detection_laser.yaml --out det\n"
-        "Writes planes.json (n.p = d in the sensor frame, covariance of (n, d)), labels.png (16-bit "
+        "Writes planes.json (n.p = d in the sensor frame, covariance of (n, d)), labels.png "
+        "(16-bit "
         "plane id, 0 = none),\nlabels_color.png, classes.png (grid methods: planar green, "
         "spherical blue, linear red, sparse grey),\nsegmented.ply and config.yaml.");
   }
@@ -220,11 +245,15 @@ class DetectCommand : public Command {
     ds::ImageRgb8 classes(cloud.width, cloud.height);
     if (have_classes) {
       static const std::uint8_t kClassRgb[4][3] = {
-          {190, 190, 190}, {220, 30, 30}, {30, 190, 30}, {40, 70, 230}};  // sparse linear planar spherical
+          {190, 190, 190},
+          {220, 30, 30},
+          {30, 190, 30},
+          {40, 70, 230}};  // sparse linear planar spherical
       for (int y = 0; y < cloud.height; ++y) {
         for (int x = 0; x < cloud.width; ++x) {
-          const auto cls = seg.cell_classes[static_cast<std::size_t>(y / seg.cell_size) *
-                                                seg.cells_x + x / seg.cell_size];
+          const auto cls =
+              seg.cell_classes[static_cast<std::size_t>(y / seg.cell_size) * seg.cells_x +
+                               x / seg.cell_size];
           const std::uint8_t* rgb = kClassRgb[static_cast<int>(cls)];
           std::memcpy(&classes.data[3 * (static_cast<std::size_t>(y) * cloud.width + x)], rgb, 3);
         }
@@ -256,7 +285,8 @@ class DetectCommand : public Command {
                   valid ? 100.0 * assigned / valid : 0.0);
       std::string stages;
       for (const auto& [stage, ms] : seg.timings_ms) {
-        std::snprintf(line, sizeof(line), "%s%s %.2f", stages.empty() ? "" : ", ", stage.c_str(), ms);
+        std::snprintf(line, sizeof(line), "%s%s %.2f", stages.empty() ? "" : ", ", stage.c_str(),
+                      ms);
         stages += line;
       }
       std::printf("time       detect %.2f ms (%s), load %.1f ms, write %.1f ms\n", detect_ms,
@@ -268,7 +298,8 @@ class DetectCommand : public Command {
                     p.id, p.normal.x(), p.normal.y(), p.normal.z(), p.d,
                     static_cast<long long>(p.point_count), 1000.0 * std::sqrt(p.mse));
       }
-      if (seg.planes.size() > shown) std::printf("  ... %zu more in planes.json\n", seg.planes.size() - shown);
+      if (seg.planes.size() > shown)
+        std::printf("  ... %zu more in planes.json\n", seg.planes.size() - shown);
       std::printf("output     %s (planes.json, labels.png, labels_color.png%s, segmented.ply)\n",
                   out_.c_str(), have_classes ? ", classes.png" : "");
     }

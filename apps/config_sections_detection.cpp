@@ -22,8 +22,8 @@ void VisitDetection(FieldVisitor& v, DetectionSection& c) {
   v.Field("gamma", p.gamma, "gamma: max distance of a grid centre / point to the region plane [m]",
           1e-6, 10.0);
   v.Field("epsilon", p.epsilon, "epsilon: max region MSE (eq. 3) [m^2]", 1e-12, 10.0);
-  v.Field("delta", p.delta, "delta: PBRG max 3D distance between range-image neighbours [m]",
-          1e-6, 100.0);
+  v.Field("delta", p.delta, "delta: PBRG max 3D distance between range-image neighbours [m]", 1e-6,
+          100.0);
   v.Field("theta", p.theta, "theta: min plane size [points] (GBRG: ceil(theta/k^2) grids)", 3,
           100000000);
   v.Field("sigma0", p.sigma0, "sensor noise at zero range, along the ray [m]", 0.0, 10.0);
@@ -70,8 +70,8 @@ void VisitGrid(FieldVisitor& v, detection::GridParams& c) {
 std::vector<std::string> ValidateGrid(const detection::GridParams& c) { return c.Validate(); }
 
 PLANESLAM_REGISTER_CONFIG_SECTION(detection::GridParams, "grid",
-                                  "Grid-based region growing (GBRG, paper Section III)",
-                                  &VisitGrid, &ValidateGrid);
+                                  "Grid-based region growing (GBRG, paper Section III)", &VisitGrid,
+                                  &ValidateGrid);
 
 void VisitPoint(FieldVisitor& v, detection::PointParams& c) {
   v.Field("seed_neighbours", c.seed_neighbours,

@@ -15,9 +15,9 @@ namespace planeslam::app {
 
 /// YAML section "detection": the shared thresholds with the threshold model as a string.
 struct DetectionSection {
-  std::string method = "grid";           ///< default detector of `detect` and `run`
+  std::string method = "grid";            ///< default detector of `detect` and `run`
   std::string threshold_model = "depth";  ///< constant (the paper) | depth (sensor noise model)
-  detection::DetectionParams params;     ///< params.model is set from threshold_model
+  detection::DetectionParams params;      ///< params.model is set from threshold_model
 };
 
 /// Method names MakeDetector accepts, e.g. for --help and the benchmark:

@@ -1,7 +1,6 @@
 #include "planeslam/detection/fast_moments.hpp"
 
 #include <Eigen/Geometry>
-
 #include <algorithm>
 #include <cmath>
 
@@ -68,8 +67,14 @@ SymEigen3 SymEigen3Smallest(const double c[6]) {
   const double scale = std::max(std::abs(e.l3), std::abs(e.l1));
   double best = n01;
   Eigen::Vector3d v = c01;
-  if (n02 > best) { best = n02; v = c02; }
-  if (n12 > best) { best = n12; v = c12; }
+  if (n02 > best) {
+    best = n02;
+    v = c02;
+  }
+  if (n12 > best) {
+    best = n12;
+    v = c12;
+  }
   if (best > 1e-28 * scale * scale * scale * scale && best > 0.0) {
     e.v1 = v / std::sqrt(best);
   } else {
@@ -80,16 +85,17 @@ SymEigen3 SymEigen3Smallest(const double c[6]) {
     if (row.squaredNorm() <= 0.0) {
       e.v1 = Eigen::Vector3d::UnitZ();
     } else {
-      Eigen::Vector3d any = std::abs(row.x()) < 0.9 ? Eigen::Vector3d::UnitX()
-                                                    : Eigen::Vector3d::UnitY();
+      Eigen::Vector3d any =
+          std::abs(row.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
       e.v1 = row.cross(any).normalized();
     }
   }
   // Rayleigh quotient: accurate smallest eigenvalue even when l1 << l3 (the trig form loses it to
   // cancellation at ~1e-16 l3).
   const Eigen::Vector3d& v1 = e.v1;
-  const double rq = c[0] * v1.x() * v1.x() + c[3] * v1.y() * v1.y() + c[5] * v1.z() * v1.z() +
-                    2.0 * (c[1] * v1.x() * v1.y() + c[2] * v1.x() * v1.z() + c[4] * v1.y() * v1.z());
+  const double rq =
+      c[0] * v1.x() * v1.x() + c[3] * v1.y() * v1.y() + c[5] * v1.z() * v1.z() +
+      2.0 * (c[1] * v1.x() * v1.y() + c[2] * v1.x() * v1.z() + c[4] * v1.y() * v1.z());
   e.l1 = std::max(0.0, std::min(rq, e.l2));
   return e;
 }
@@ -134,10 +140,9 @@ FastFit RefitFrom(const MomentSums& m, const Eigen::Vector3d& n0) {
     if (!(norm2 > 1e-300) || !std::isfinite(norm2)) return FitSums(m);
     x = y / std::sqrt(norm2);
   }
-  const double l1 = std::max(0.0, c[0] * x.x() * x.x() + c[3] * x.y() * x.y() +
-                                      c[5] * x.z() * x.z() +
-                                      2.0 * (c[1] * x.x() * x.y() + c[2] * x.x() * x.z() +
-                                             c[4] * x.y() * x.z()));
+  const double l1 =
+      std::max(0.0, c[0] * x.x() * x.x() + c[3] * x.y() * x.y() + c[5] * x.z() * x.z() +
+                        2.0 * (c[1] * x.x() * x.y() + c[2] * x.x() * x.z() + c[4] * x.y() * x.z()));
   const double s = c[0] + c[3] + c[5] - l1;  // l2 + l3
   const double e2 = a00 + a11 + a22;         // l1 l2 + l1 l3 + l2 l3
   const double p = e2 - l1 * s;              // l2 l3

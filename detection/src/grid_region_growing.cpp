@@ -24,7 +24,7 @@ struct CellInfo {
   Eigen::Vector3d n = Eigen::Vector3d::Zero();  ///< oriented unit normal (d >= 0)
   Eigen::Vector3d m = Eigen::Vector3d::Zero();  ///< mass centre [m]
   double mse = 0.0;                             ///< [m^2]
-  double cos_tol = 1.0;  ///< eta test: |n_GR . n_g| must exceed this (-1 = no test)
+  double cos_tol = 1.0;    ///< eta test: |n_GR . n_g| must exceed this (-1 = no test)
   double angle_tol = 0.0;  ///< the same tolerance as an angle [rad]
 };
 
@@ -107,16 +107,28 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         if (!std::isfinite(p.z())) continue;
         const double px = p.x(), py = p.y(), pz = p.z();
         k_ += 1.0;
-        sx += px; sy += py; sz += pz;
-        xx += px * px; xy += px * py; xz += px * pz;
-        yy += py * py; yz += py * pz; zz += pz * pz;
+        sx += px;
+        sy += py;
+        sz += pz;
+        xx += px * px;
+        xy += px * py;
+        xz += px * pz;
+        yy += py * py;
+        yz += py * pz;
+        zz += pz * pz;
       }
       if (k_ > 0) {
         MomentSums& m = crow[cx];
         m.k += k_;
-        m.sx += sx; m.sy += sy; m.sz += sz;
-        m.xx += xx; m.xy += xy; m.xz += xz;
-        m.yy += yy; m.yz += yz; m.zz += zz;
+        m.sx += sx;
+        m.sy += sy;
+        m.sz += sz;
+        m.xx += xx;
+        m.xy += xy;
+        m.xz += xz;
+        m.yy += yy;
+        m.yz += yz;
+        m.zz += zz;
       }
     }
   }
@@ -128,8 +140,12 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     if (m.k <= 0) continue;
     const double z = spherical ? m.Centroid().norm() : m.sz / m.k;
     const double w = z > 0 ? (s0 + s2 * z * z) * (s0 + s2 * z * z) / (z * z) : 0.0;
-    m.wxx = w * m.xx; m.wxy = w * m.xy; m.wxz = w * m.xz;
-    m.wyy = w * m.yy; m.wyz = w * m.yz; m.wzz = w * m.zz;
+    m.wxx = w * m.xx;
+    m.wxy = w * m.xy;
+    m.wxz = w * m.xz;
+    m.wyy = w * m.yy;
+    m.wyz = w * m.yz;
+    m.wzz = w * m.zz;
   }
 
   // ---- 2. Shape classification (Section III-A) and the planar grids' planes.
@@ -177,8 +193,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     ci.mse = mse;
     if (depth_model) {
       // Normal noise of a small grid: std ~ sigma_n / sqrt(l2) [rad].
-      const double ang =
-          eta + params_.eta_sigmas * std::sqrt(noise_mse / std::max(e.l2, 1e-18));
+      const double ang = eta + params_.eta_sigmas * std::sqrt(noise_mse / std::max(e.l2, 1e-18));
       ci.angle_tol = ang;
       ci.cos_tol = ang >= 0.5 * M_PI ? -1.0 : std::cos(ang);
       // Seed order under the noise model: the paper's minimal MSE, plus the ray noise leaking in
@@ -200,8 +215,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   ws.used.assign(num_cells, 0);
   ws.queued.assign(num_cells, -1);
   ws.regions.clear();
-  const std::size_t theta_grids =
-      static_cast<std::size_t>((params_.theta + k * k - 1) / (k * k));
+  const std::size_t theta_grids = static_cast<std::size_t>((params_.theta + k * k - 1) / (k * k));
   const int dx[4] = {1, -1, 0, 0};
   const int dy[4] = {0, 0, 1, -1};
   for (const std::uint64_t key : ws.seeds) {
@@ -248,11 +262,11 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         if (tilt > 0.02) {
           const double ang = ci.angle_tol + tilt;
           if (ang < 0.5 * M_PI && dot <= std::cos(ang)) continue;
-        } else if (dot <= ci.cos_tol) continue;
+        } else if (dot <= ci.cos_tol)
+          continue;
         const double lateral = std::sqrt(std::max(0.0, diff.squaredNorm() - off * off));
         // Noise of the grid's centre along the region normal: sigma_n / sqrt(K_g).
-        gamma = params_.Gamma(std::sqrt(gs.EffectiveMse(fit.normal, tilt) / gs.k)) +
-                tilt * lateral;
+        gamma = params_.Gamma(std::sqrt(gs.EffectiveMse(fit.normal, tilt) / gs.k)) + tilt * lateral;
       } else {
         if (std::abs(fit.normal.dot(ci.n)) <= ci.cos_tol) continue;
         gamma = params_.gamma;
@@ -374,8 +388,11 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   internal::FinalizeSegmentation(ws.labels, width, height, ws.regions, out);
   out.cell_classes = ws.classes;
   const auto t5 = Clock::now();
-  out.timings_ms = {{"moments", Ms(t0, t1)}, {"classify", Ms(t1, t2)}, {"grow", Ms(t2, t3)},
-                    {"refine", Ms(t3, t4)},  {"finalize", Ms(t4, t5)}};
+  out.timings_ms = {{"moments", Ms(t0, t1)},
+                    {"classify", Ms(t1, t2)},
+                    {"grow", Ms(t2, t3)},
+                    {"refine", Ms(t3, t4)},
+                    {"finalize", Ms(t4, t5)}};
   return out;
 }
 

@@ -22,8 +22,8 @@ struct Workspace {
   std::vector<float> rel2;            ///< (sigma(z)/z)^2 per pixel
   std::vector<int> members;
   std::vector<MomentSums> regions;
-  std::vector<FastFit> fits;                      ///< of accepted regions, at acceptance
-  std::vector<std::pair<int, int>> stolen;        ///< (point, previous region) of this growth
+  std::vector<FastFit> fits;                ///< of accepted regions, at acceptance
+  std::vector<std::pair<int, int>> stolen;  ///< (point, previous region) of this growth
 };
 
 Workspace& ThreadWorkspace() {
@@ -44,7 +44,8 @@ double MseAbout(const MomentSums& m, const Eigen::Vector3d& n) {
 
 std::vector<std::string> PointParams::Validate() const {
   std::vector<std::string> problems;
-  if (seed_neighbours < 2 || seed_neighbours > 8) problems.push_back("seed_neighbours must be in [2, 8]");
+  if (seed_neighbours < 2 || seed_neighbours > 8)
+    problems.push_back("seed_neighbours must be in [2, 8]");
   if (!(alpha > 0 && alpha < 1)) problems.push_back("alpha must be in (0, 1)");
   if (!(beta > 0 && beta < 1)) problems.push_back("beta must be in (0, 1)");
   if (refit_interval < 0) problems.push_back("refit_interval must be >= 0 (0 = adaptive)");
@@ -190,8 +191,8 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
           // Approximate distance test against the current plane; MSE bound about its normal.
           const double dist = std::abs(fit.normal.dot(pc) - fit.d);
           if (dist >= gamma_for(fit, region)) continue;
-          const double eps = params_.Epsilon(
-              merged.EffectiveMse(fit.normal, merged.NormalTilt(fit.l2)));
+          const double eps =
+              params_.Epsilon(merged.EffectiveMse(fit.normal, merged.NormalTilt(fit.l2)));
           if (MseAbout(merged, fit.normal) < eps) {
             accept = true;
           } else {
@@ -229,8 +230,8 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
           fit = new_fit;
           since_refit = 0;
         } else {
-          const double interval = refit_interval > 0 ? refit_interval
-                                                     : std::max(1.0, region.k / 64.0);
+          const double interval =
+              refit_interval > 0 ? refit_interval : std::max(1.0, region.k / 64.0);
           if (since_refit >= interval) {
             fit = RefitFrom(region, fit.normal);
             since_refit = 0;
@@ -245,7 +246,7 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
       ws.regions.push_back(region);
       ws.fits.push_back(FitSums(region));
     } else {
-      for (int m : ws.members) ws.labels[m] = -1;  // R': out of PCD, no seed, no growth
+      for (int m : ws.members) ws.labels[m] = -1;     // R': out of PCD, no seed, no growth
       for (const auto& [point, owner] : ws.stolen) {  // joint points go back to their plane
         const Eigen::Vector3f& q = pts[point];
         ws.regions[owner].Add(q.x(), q.y(), q.z(), ws.rel2[point]);

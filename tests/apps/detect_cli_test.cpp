@@ -3,13 +3,12 @@
 #include <sys/wait.h>
 
 #include <Eigen/Core>
-#include <nlohmann/json.hpp>
-
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 
@@ -35,8 +34,8 @@ struct CliResult {
 
 CliResult RunDetect(const std::string& args, const fs::path& dir) {
   const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
-  const std::string command = std::string(PLANESLAM_BIN) + " detect " + args + " >" +
-                              out.string() + " 2>" + err.string();
+  const std::string command =
+      std::string(PLANESLAM_BIN) + " detect " + args + " >" + out.string() + " 2>" + err.string();
   const int status = std::system(command.c_str());
   CliResult r;
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
@@ -82,10 +81,10 @@ TEST(DetectCli, WritesPlanesLabelsImagesAndPly) {
   for (const std::string method : {"grid", "point"}) {
     SCOPED_TRACE(method);
     const fs::path out = dir / ("out_" + method);
-    const CliResult r = RunDetect((dir / "depth.png").string() + " --intrinsics " +
-                                      (dir / "camera.yaml").string() + " --method " + method +
-                                      " --out " + out.string(),
-                                  dir);
+    const CliResult r =
+        RunDetect((dir / "depth.png").string() + " --intrinsics " + (dir / "camera.yaml").string() +
+                      " --method " + method + " --out " + out.string(),
+                  dir);
     ASSERT_EQ(r.exit_code, 0) << r.err;
     EXPECT_NE(r.out.find("planes"), std::string::npos);
     const auto json = nlohmann::json::parse(Slurp(out / "planes.json"));
@@ -97,7 +96,8 @@ TEST(DetectCli, WritesPlanesLabelsImagesAndPly) {
       for (const auto& p : json["planes"]) {
         const Eigen::Vector3d n(p["normal"][0].get<double>(), p["normal"][1].get<double>(),
                                 p["normal"][2].get<double>());
-        if (n.dot(truth.n) > std::cos(M_PI / 180) && std::abs(p["d"].get<double>() - truth.d) < 0.02)
+        if (n.dot(truth.n) > std::cos(M_PI / 180) &&
+            std::abs(p["d"].get<double>() - truth.d) < 0.02)
           found = true;
         ASSERT_EQ(p["covariance"].size(), 4u);
         ASSERT_EQ(p["covariance"][0].size(), 4u);

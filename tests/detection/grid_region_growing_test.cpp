@@ -2,10 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <set>
-
-#include <Eigen/Eigenvalues>
 
 #include "detection_checks.hpp"
 #include "synthetic_scene.hpp"
@@ -60,8 +59,8 @@ TEST(GridRegionGrowing, KinectNoiseRoomDepthThresholds) {
     const Segmentation seg = gbrg.Detect(frame.cloud);
     test::ExpectPlanesFound(frame, seg, 2000, 2.0, 0.02, "noisy grid" + std::to_string(k));
     // Most valid pixels belong to planes (the scene is all planes).
-    const auto assigned = std::count_if(seg.labels.begin(), seg.labels.end(),
-                                        [](int l) { return l >= 1; });
+    const auto assigned =
+        std::count_if(seg.labels.begin(), seg.labels.end(), [](int l) { return l >= 1; });
     EXPECT_GT(assigned, 0.8 * frame.cloud.CountValid()) << "grid" << k;
   }
 }
@@ -81,7 +80,8 @@ TEST(GridRegionGrowing, ClassifiesShapes) {
   // Points on a line (one row per grid valid... a single valid column): grids are linear or sparse.
   datasets::OrganizedCloud line(9, 9);
   for (int r = 0; r < 9; ++r)
-    for (int c = 0; c < 9; ++c) line.at(r, c) = Eigen::Vector3f(0.01f * c, 0.0f, 2.0f + 0.01f * r * 0);
+    for (int c = 0; c < 9; ++c)
+      line.at(r, c) = Eigen::Vector3f(0.01f * c, 0.0f, 2.0f + 0.01f * r * 0);
   for (int r = 0; r < 9; ++r)
     for (int c = 0; c < 9; ++c) line.at(r, c) = Eigen::Vector3f(0.01f * (c + 3 * r), 0.0f, 2.0f);
   const Segmentation lin = GridRegionGrowing(PaperConstants(), GridParams()).Detect(line);

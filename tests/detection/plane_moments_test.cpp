@@ -1,13 +1,13 @@
+#include "planeslam/detection/plane_moments.hpp"
+
 #include <gtest/gtest.h>
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
-
 #include <random>
 
 #include "planeslam/detection/fast_moments.hpp"
 #include "planeslam/detection/plane_covariance.hpp"
-#include "planeslam/detection/plane_moments.hpp"
 
 namespace planeslam::detection {
 namespace {
@@ -21,7 +21,8 @@ std::vector<Eigen::Vector3d> NoisyPlanePoints(int n, unsigned seed, double noise
   const Eigen::Vector3d a = nn.unitOrthogonal(), b = nn.cross(a);
   std::vector<Eigen::Vector3d> pts;
   for (int i = 0; i < n; ++i) {
-    pts.push_back(nn * (d + (noise > 0 ? gauss(rng) : 0.0)) + 1.5 * uni(rng) * a + 0.7 * uni(rng) * b);
+    pts.push_back(nn * (d + (noise > 0 ? gauss(rng) : 0.0)) + 1.5 * uni(rng) * a +
+                  0.7 * uni(rng) * b);
   }
   return pts;
 }

@@ -43,8 +43,8 @@ TEST(PointRegionGrowing, KinectNoiseRoomDepthThresholds) {
     const Segmentation seg = pbrg.Detect(frame.cloud);
     test::ExpectPlanesFound(frame, seg, 2000, 2.0, 0.02,
                             "noisy point interval " + std::to_string(interval));
-    const auto assigned = std::count_if(seg.labels.begin(), seg.labels.end(),
-                                        [](int l) { return l >= 1; });
+    const auto assigned =
+        std::count_if(seg.labels.begin(), seg.labels.end(), [](int l) { return l >= 1; });
     EXPECT_GT(assigned, 0.8 * frame.cloud.CountValid());
   }
 }
@@ -86,9 +86,11 @@ TEST(PointRegionGrowing, DeterministicPartitionWithConsistentPlanes) {
     if (!found) {
       for (const auto& q : c.planes)
         if (q.point_count >= 1000)
-          ADD_FAILURE() << "  candidate n=" << q.normal.transpose() << " d=" << q.d << " K=" << q.point_count;
+          ADD_FAILURE() << "  candidate n=" << q.normal.transpose() << " d=" << q.d
+                        << " K=" << q.point_count;
     }
-    EXPECT_TRUE(found) << "plane n=" << p.normal.transpose() << " d=" << p.d << " K=" << p.point_count;
+    EXPECT_TRUE(found) << "plane n=" << p.normal.transpose() << " d=" << p.d
+                       << " K=" << p.point_count;
   }
 }
 

@@ -100,8 +100,7 @@ void CheckLaserScene(const Segmentation& seg, const std::string& what) {
   for (const auto& p : seg.planes) {
     if (p.point_count < 1000) continue;
     const double to_y = AngleDeg(p.normal, Eigen::Vector3d::UnitY());
-    if (p.point_count >= 2000 && to_y < 10 && p.normal.y() < 0 && p.centroid.y() < 0)
-      ground = true;
+    if (p.point_count >= 2000 && to_y < 10 && p.normal.y() < 0 && p.centroid.y() < 0) ground = true;
     if (p.point_count >= 2000 && to_y < 10 && p.normal.y() > 0 && p.centroid.y() > 0)
       ceiling = true;
     if (to_y > 80) walls.push_back(&p);

@@ -3,7 +3,6 @@
 // with a box standing on the floor, seen by a 640x480 pinhole camera (fx = fy = 525). Every pixel
 // knows which plane it hit, so detections can be checked against exact planes.
 #include <Eigen/Core>
-
 #include <cmath>
 #include <cstdint>
 #include <limits>

@@ -35,21 +35,22 @@ const char* ToString(ThresholdModel model);
 /// is noise, not shape).
 struct DetectionParams {
   ThresholdModel model = ThresholdModel::kDepth;
-  double eta_deg = 10.0;      ///< max angle between region and grid normals [deg] (eta = cos)
-  double gamma = 0.01;        ///< max distance of a grid centre / point to the region plane [m]
-  double epsilon = 4e-6;      ///< max region MSE [m^2] (eq. 3); 4e-6 = (2 mm)^2
-  double delta = 0.05;        ///< PBRG: max 3D distance between range-image neighbours [m]
-  int theta = 400;            ///< min plane size [points]; GBRG uses ceil(theta / k^2) grids
-  double sigma0 = 0.0;        ///< sensor noise at zero range [m]
+  double eta_deg = 10.0;       ///< max angle between region and grid normals [deg] (eta = cos)
+  double gamma = 0.01;         ///< max distance of a grid centre / point to the region plane [m]
+  double epsilon = 4e-6;       ///< max region MSE [m^2] (eq. 3); 4e-6 = (2 mm)^2
+  double delta = 0.05;         ///< PBRG: max 3D distance between range-image neighbours [m]
+  int theta = 400;             ///< min plane size [points]; GBRG uses ceil(theta / k^2) grids
+  double sigma0 = 0.0;         ///< sensor noise at zero range [m]
   double sigma_z2 = 1.425e-3;  ///< quadratic depth noise [1/m] (Kinect: Khoshelham & Elberink 2012)
   double gamma_sigmas = 3.0;   ///< depth model: gamma grows by this many sigma(z)
   double delta_sigmas = 8.0;   ///< depth model: delta grows by this many sigma(z)
   double epsilon_sigmas = 1.5;  ///< depth model: sqrt(epsilon) grows by this many sigma_rms
-  double eta_sigmas = 3.0;     ///< depth model: eta grows by this many normal std devs
-  double planar_sigmas = 1.5;  ///< depth model: grids with rms residual below this many sigma are planar
-  bool refine_boundary = true;  ///< give edge pixels of non-planar grids to an adjacent plane
-  double refine_sigmas = 3.0;   ///< refinement: max |n.p - d| = gamma(z) with this many sigma
-  bool merge_regions = true;    ///< merge adjacent regions that describe one surface
+  double eta_sigmas = 3.0;      ///< depth model: eta grows by this many normal std devs
+  double planar_sigmas =
+      1.5;  ///< depth model: grids with rms residual below this many sigma are planar
+  bool refine_boundary = true;   ///< give edge pixels of non-planar grids to an adjacent plane
+  double refine_sigmas = 3.0;    ///< refinement: max |n.p - d| = gamma(z) with this many sigma
+  bool merge_regions = true;     ///< merge adjacent regions that describe one surface
   double merge_angle_deg = 5.0;  ///< merge: max angle between the two normals [deg]
 
   /// Sensor noise sigma at depth (or range) z [m].

@@ -1,13 +1,12 @@
 #pragma once
-/// Flat, allocation-free moment sums and a closed-form 3x3 symmetric eigen solver: the inner loop of
-/// both region growers (one fit per tested grid or point, paper eq. 5-6).
+/// Flat, allocation-free moment sums and a closed-form 3x3 symmetric eigen solver: the inner loop
+/// of both region growers (one fit per tested grid or point, paper eq. 5-6).
 ///
 /// Sums are kept about the origin in double (K, S = sum p, Q = sum p p^T, 10 doubles). Inputs are
 /// float metres; with |p| < 100 m and K < 10^7 the cancellation in C = Q - S m^T (eq. 6) costs at
 /// most ~1e-16 * K * |p|^2 absolutely, i.e. an MSE error below 1e-12 m^2, far under any threshold
 /// here, so the reference-point shift that PlaneMoments does is not needed in the hot loop.
 #include <Eigen/Core>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -26,39 +25,69 @@ namespace planeslam::detection {
 /// is n^T W n / K, for any n, in O(1). This is what makes grazing surfaces (noise mostly along the
 /// surface) and facing surfaces (noise across it) comparable under one threshold.
 struct MomentSums {
-  double k = 0.0;                        ///< point count K
-  double sx = 0, sy = 0, sz = 0;         ///< S = sum p [m]
-  double xx = 0, xy = 0, xz = 0;         ///< Q = sum p p^T [m^2] (upper triangle)
+  double k = 0.0;                 ///< point count K
+  double sx = 0, sy = 0, sz = 0;  ///< S = sum p [m]
+  double xx = 0, xy = 0, xz = 0;  ///< Q = sum p p^T [m^2] (upper triangle)
   double yy = 0, yz = 0, zz = 0;
-  double wxx = 0, wxy = 0, wxz = 0;      ///< W = sum w_i p_i p_i^T [m^2] (noise moment)
+  double wxx = 0, wxy = 0, wxz = 0;  ///< W = sum w_i p_i p_i^T [m^2] (noise moment)
   double wyy = 0, wyz = 0, wzz = 0;
 
   /// Adds point (x, y, z) whose relative ray noise is w = (sigma / depth)^2 [1].
   void Add(double x, double y, double z, double w) {
     k += 1.0;
-    sx += x; sy += y; sz += z;
+    sx += x;
+    sy += y;
+    sz += z;
     const double xx_ = x * x, xy_ = x * y, xz_ = x * z, yy_ = y * y, yz_ = y * z, zz_ = z * z;
-    xx += xx_; xy += xy_; xz += xz_;
-    yy += yy_; yz += yz_; zz += zz_;
-    wxx += w * xx_; wxy += w * xy_; wxz += w * xz_;
-    wyy += w * yy_; wyz += w * yz_; wzz += w * zz_;
+    xx += xx_;
+    xy += xy_;
+    xz += xz_;
+    yy += yy_;
+    yz += yz_;
+    zz += zz_;
+    wxx += w * xx_;
+    wxy += w * xy_;
+    wxz += w * xz_;
+    wyy += w * yy_;
+    wyz += w * yz_;
+    wzz += w * zz_;
   }
   void Merge(const MomentSums& o) {
     k += o.k;
-    sx += o.sx; sy += o.sy; sz += o.sz;
-    xx += o.xx; xy += o.xy; xz += o.xz;
-    yy += o.yy; yz += o.yz; zz += o.zz;
-    wxx += o.wxx; wxy += o.wxy; wxz += o.wxz;
-    wyy += o.wyy; wyz += o.wyz; wzz += o.wzz;
+    sx += o.sx;
+    sy += o.sy;
+    sz += o.sz;
+    xx += o.xx;
+    xy += o.xy;
+    xz += o.xz;
+    yy += o.yy;
+    yz += o.yz;
+    zz += o.zz;
+    wxx += o.wxx;
+    wxy += o.wxy;
+    wxz += o.wxz;
+    wyy += o.wyy;
+    wyz += o.wyz;
+    wzz += o.wzz;
   }
   /// Removes a subset previously added (exact up to round-off).
   void Subtract(const MomentSums& o) {
     k -= o.k;
-    sx -= o.sx; sy -= o.sy; sz -= o.sz;
-    xx -= o.xx; xy -= o.xy; xz -= o.xz;
-    yy -= o.yy; yz -= o.yz; zz -= o.zz;
-    wxx -= o.wxx; wxy -= o.wxy; wxz -= o.wxz;
-    wyy -= o.wyy; wyz -= o.wyz; wzz -= o.wzz;
+    sx -= o.sx;
+    sy -= o.sy;
+    sz -= o.sz;
+    xx -= o.xx;
+    xy -= o.xy;
+    xz -= o.xz;
+    yy -= o.yy;
+    yz -= o.yz;
+    zz -= o.zz;
+    wxx -= o.wxx;
+    wxy -= o.wxy;
+    wxz -= o.wxz;
+    wyy -= o.wyy;
+    wyz -= o.wyz;
+    wzz -= o.wzz;
   }
   Eigen::Vector3d Centroid() const { return Eigen::Vector3d(sx, sy, sz) / k; }
   /// n^T W n: summed noise variance of the points along unit normal n [m^2].
@@ -92,7 +121,7 @@ struct MomentSums {
 
 /// Eigen decomposition of a symmetric 3x3 matrix as needed by plane fitting.
 struct SymEigen3 {
-  double l1 = 0, l2 = 0, l3 = 0;                 ///< eigenvalues, ascending
+  double l1 = 0, l2 = 0, l3 = 0;                  ///< eigenvalues, ascending
   Eigen::Vector3d v1 = Eigen::Vector3d::UnitZ();  ///< unit eigenvector of l1
 };
 

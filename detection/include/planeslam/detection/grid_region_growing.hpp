@@ -9,10 +9,11 @@
 /// 3. Seeds are the unassigned planar grids in order of increasing MSE (ties by grid index,
 ///    row-major); the order is computed once by sorting (MSE, index) keys, which pops exactly what
 ///    the paper's min-heap would, with less work. Under the depth threshold model the key adds
-///    the ray noise leaking through the grid's normal uncertainty (far noisy grids seed last). A region grows breadth-first over 4-neighbour grids (the grid image's
-///    left/right/up/down). 4- rather than 8-neighbours: a diagonal grid touches the region in one
-///    corner pixel only, so it adds no evidence of continuity, and 8-neighbours leak across thin
-///    diagonal edges; every grid of a 4-connected plane is still reached. A candidate g joins when
+///    the ray noise leaking through the grid's normal uncertainty (far noisy grids seed last). A
+///    region grows breadth-first over 4-neighbour grids (the grid image's left/right/up/down). 4-
+///    rather than 8-neighbours: a diagonal grid touches the region in one corner pixel only, so it
+///    adds no evidence of continuity, and 8-neighbours leak across thin diagonal edges; every grid
+///    of a 4-connected plane is still reached. A candidate g joins when
 ///      n_GR . n_g > cos(eta),  |n_GR . (m_GR - m_g)| < gamma,  MSE(GR u g) < epsilon
 ///    (Algorithm 2 line 8), and the region's plane is refitted from the merged moments after every
 ///    join (eq. 5-6). A rejected grid may be tested again when another of its neighbours joins
@@ -32,8 +33,8 @@ namespace planeslam::detection {
 
 /// GBRG-specific parameters (Section III-A).
 struct GridParams {
-  int cell_size = 3;     ///< grid side k [px] (paper: 3)
-  int mu = 0;            ///< min valid points of a non-sparse grid; 0 = k^2 - k + 1 (paper: 7 for 3x3)
+  int cell_size = 3;  ///< grid side k [px] (paper: 3)
+  int mu = 0;         ///< min valid points of a non-sparse grid; 0 = k^2 - k + 1 (paper: 7 for 3x3)
   double alpha = 0.006;  ///< linear when l2 <= alpha l3 (paper value)
   double beta = 0.4;     ///< planar when l1 <= beta l2 (paper value)
 

@@ -1,18 +1,18 @@
 #pragma once
 /// Sufficient statistics of a point set and the least-squares plane they define (paper eq. 3-6).
 #include <Eigen/Core>
-
 #include <cstdint>
 
 namespace planeslam::detection {
 
 /// Result of fitting a plane to moments.
 struct PlaneFit {
-  Eigen::Vector3d normal = Eigen::Vector3d::Zero();  ///< unit, oriented towards the sensor side: d >= 0
-  double d = 0.0;                                    ///< offset [m], n.p = d
-  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();  ///< mass centre m = S/K [m]
+  Eigen::Vector3d normal =
+      Eigen::Vector3d::Zero();  ///< unit, oriented towards the sensor side: d >= 0
+  double d = 0.0;               ///< offset [m], n.p = d
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();     ///< mass centre m = S/K [m]
   Eigen::Vector3d eigenvalues = Eigen::Vector3d::Zero();  ///< of C, ascending [m^2]
-  double mse = 0.0;  ///< lambda_min / K [m^2] (eq. 5; eq. 4's missing /K is a slip)
+  double mse = 0.0;    ///< lambda_min / K [m^2] (eq. 5; eq. 4's missing /K is a slip)
   bool valid = false;  ///< false with fewer than 3 points
 };
 
@@ -29,7 +29,8 @@ class PlaneMoments {
   void Add(const Eigen::Vector3f& p) { Add(Eigen::Vector3d(p.cast<double>())); }
   void Merge(const PlaneMoments& other);
   void Clear() { *this = PlaneMoments(reference_); }
-  /// Moments from raw sums taken relative to `reference`: K, sum (p - ref), sum (p - ref)(p - ref)^T.
+  /// Moments from raw sums taken relative to `reference`: K, sum (p - ref), sum (p - ref)(p -
+  /// ref)^T.
   static PlaneMoments FromSums(std::int64_t count, const Eigen::Vector3d& sum,
                                const Eigen::Matrix3d& sum_sq,
                                const Eigen::Vector3d& reference = Eigen::Vector3d::Zero());
@@ -53,7 +54,7 @@ class PlaneMoments {
  private:
   Eigen::Vector3d reference_ = Eigen::Vector3d::Zero();
   std::int64_t count_ = 0;
-  Eigen::Vector3d sum_ = Eigen::Vector3d::Zero();  ///< sum (p - reference)
+  Eigen::Vector3d sum_ = Eigen::Vector3d::Zero();     ///< sum (p - reference)
   Eigen::Matrix3d sum_sq_ = Eigen::Matrix3d::Zero();  ///< sum (p - reference)(p - reference)^T
 };
 
