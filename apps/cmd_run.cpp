@@ -125,7 +125,7 @@ class RunCommand : public Command {
     ds::Trajectory ground_truth;
     std::ostringstream frame_log;  // frames.csv: what the tracker did with each frame
     frame_log << "index,timestamp,keyframe,planes,matches,tracked,degenerate,point_to_plane,"
-                 "loop_closures\n";
+                 "loop_closures,refused\n";
     std::size_t done = 0;
     const auto wall_start = Clock::now();
     for (std::size_t i : indices) {
@@ -142,7 +142,7 @@ class RunCommand : public Command {
       frame_log << i << "," << ds::FormatRoundTrip(frame.timestamp) << "," << result.keyframe
                 << "," << result.planes << "," << result.matches << "," << result.tracked << ","
                 << result.degenerate << "," << result.used_point_to_plane << ","
-                << result.loop_closures << "\n";
+                << result.loop_closures << "," << result.refused << "\n";
       if (want_octomap && result.keyframe) {
         // Thinned now, inserted at the end with the optimised keyframe poses.
         keyframe_clouds.emplace_back(
@@ -198,6 +198,11 @@ class RunCommand : public Command {
         {"keyframes", stats.keyframes},
         {"loop_closures", stats.loop_closures},
         {"loop_candidates", stats.loop_candidates},
+        {"loop_refused",
+         {{"degenerate", stats.loop_refused_degenerate},
+          {"matches", stats.loop_refused_matches},
+          {"residual", stats.loop_refused_residual}}},
+        {"refused_frames", stats.refused_frames},
         {"degenerate_frames", stats.degenerate_frames},
         {"point_to_plane_frames", stats.point_to_plane_frames},
         {"untracked_frames", stats.untracked_frames},
@@ -225,8 +230,13 @@ class RunCommand : public Command {
                 done / std::max(wall_seconds, 1e-9), stats.keyframes, stats.loop_closures,
                 slam.map().size());
     std::printf(
-        "degenerate frames %zu (filled by point-to-plane alignment: %zu), untracked frames %zu\n",
-        stats.degenerate_frames, stats.point_to_plane_frames, stats.untracked_frames);
+        "degenerate frames %zu (filled by point-to-plane alignment: %zu), untracked frames %zu "
+        "(refused by the prior gate: %zu)\n",
+        stats.degenerate_frames, stats.point_to_plane_frames, stats.untracked_frames,
+        stats.refused_frames);
+    std::printf("loop candidates %zu, refused: degenerate %zu, few matches %zu, residual %zu\n",
+                stats.loop_candidates, stats.loop_refused_degenerate, stats.loop_refused_matches,
+                stats.loop_refused_residual);
     std::printf("%s\n", ate_line.c_str());
     std::printf(
         "time per frame [ms]: load %.2f detect %.2f track %.2f map %.2f loop %.2f; "

@@ -23,6 +23,8 @@ void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
           "[frames] accept the result anyway after this many refusals in a row", 0, 1000000);
   v.Field("hold_velocity_when_degenerate", c.hold_velocity_when_degenerate,
           "keep the last well-determined velocity on degenerate frames");
+  v.Field("point_to_plane_fill", c.point_to_plane_fill,
+          "fill directions the planes leave open by point-to-plane alignment of the clouds");
   v.Field("loop_closure", c.loop_closure, "search and verify loop closures");
   v.Field("loop_search_radius", c.loop_search_radius,
           "[m] loop candidates are keyframes within this distance", 0.0, 1000.0);

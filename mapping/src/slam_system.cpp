@@ -120,7 +120,7 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
   const registration::AssociationResult association = registration::AssociatePlanes(
       keyframe.planes, segmentation.planes, prior, association_config_, registration_config_);
   registration::RegistrationResult reg = association.registration;
-  if (reg.converged && reg.degenerate && intrinsics_) {
+  if (config_.point_to_plane_fill && reg.converged && reg.degenerate && intrinsics_) {
     result.used_point_to_plane = registration::FillDegenerateWithPointToPlane(
         keyframe_cloud_, *intrinsics_, cloud, point_to_plane_config_, &reg);
   }
@@ -152,8 +152,22 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
   if (!use_registration) ++stats_.untracked_frames;
   if (result.degenerate) ++stats_.degenerate_frames;
 
-  if (!(result.degenerate && config_.hold_velocity_when_degenerate)) {
-    velocity_ = T_keyframe_last_.inverse() * T_keyframe_curr;
+  const Pose measured_velocity = T_keyframe_last_.inverse() * T_keyframe_curr;
+  if (!config_.hold_velocity_when_degenerate || !result.degenerate) {
+    velocity_ = measured_velocity;
+  } else if (use_registration && !reg.degenerate_directions.empty()) {
+    // Update the velocity only along the directions the planes determined. The directions are
+    // in the keyframe; the velocity's tangent lives in the last frame, R_keyframe_last^T away
+    // (for the translation and for the left-perturbed rotation alike).
+    const Eigen::Matrix3d R_last_keyframe = T_keyframe_last_.linear().transpose();
+    Vector6d delta = registration::BoxMinus(measured_velocity, velocity_);
+    for (const Vector6d& direction_keyframe : reg.degenerate_directions) {
+      Vector6d direction;
+      direction << R_last_keyframe * direction_keyframe.head<3>(),
+          R_last_keyframe * direction_keyframe.tail<3>();
+      delta -= direction * direction.dot(delta);
+    }
+    velocity_ = registration::BoxPlus(velocity_, delta);
   }
   T_keyframe_last_ = T_keyframe_curr;
   result.T_world_sensor = KeyframePose(keyframe.id) * T_keyframe_curr;
@@ -224,10 +238,18 @@ int SlamSystem::SearchLoopClosures(const Keyframe& current) {
     const registration::RegistrationResult& reg = association.registration;
     // Only a closure the planes fully determine may correct the trajectory: a degenerate one
     // would carry the (drifted) prior into the graph as if it were a measurement.
-    const bool verified = reg.converged && !reg.degenerate &&
-                          static_cast<int>(reg.inliers.size()) >= config_.loop_min_matches &&
-                          reg.residual_rms < config_.loop_max_residual;
-    if (!verified) continue;
+    if (!reg.converged || reg.degenerate) {
+      ++stats_.loop_refused_degenerate;
+      continue;
+    }
+    if (static_cast<int>(reg.inliers.size()) < config_.loop_min_matches) {
+      ++stats_.loop_refused_matches;
+      continue;
+    }
+    if (!(reg.residual_rms < config_.loop_max_residual)) {
+      ++stats_.loop_refused_residual;
+      continue;
+    }
     graph_.AddEdge(old.id, current.id, reg.T_prev_curr, InformationFromCovariance(reg.covariance),
                    EdgeKind::kLoopClosure);
     ++added;
