@@ -152,22 +152,10 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
   if (!use_registration) ++stats_.untracked_frames;
   if (result.degenerate) ++stats_.degenerate_frames;
 
-  const Pose measured_velocity = T_keyframe_last_.inverse() * T_keyframe_curr;
-  if (!config_.hold_velocity_when_degenerate || !result.degenerate) {
-    velocity_ = measured_velocity;
-  } else if (use_registration && !reg.degenerate_directions.empty()) {
-    // Update the velocity only along the directions the planes determined. The directions are
-    // in the keyframe; the velocity's tangent lives in the last frame, R_keyframe_last^T away
-    // (for the translation and for the left-perturbed rotation alike).
-    const Eigen::Matrix3d R_last_keyframe = T_keyframe_last_.linear().transpose();
-    Vector6d delta = registration::BoxMinus(measured_velocity, velocity_);
-    for (const Vector6d& direction_keyframe : reg.degenerate_directions) {
-      Vector6d direction;
-      direction << R_last_keyframe * direction_keyframe.head<3>(),
-          R_last_keyframe * direction_keyframe.tail<3>();
-      delta -= direction * direction.dot(delta);
-    }
-    velocity_ = registration::BoxPlus(velocity_, delta);
+  // An update along directions the planes left open would feed the prior back into itself.
+  // (Updating only along the determined directions was tried: synthetic room ATE 5.8 -> 72 cm.)
+  if (!(result.degenerate && config_.hold_velocity_when_degenerate)) {
+    velocity_ = T_keyframe_last_.inverse() * T_keyframe_curr;
   }
   T_keyframe_last_ = T_keyframe_curr;
   result.T_world_sensor = KeyframePose(keyframe.id) * T_keyframe_curr;

@@ -50,9 +50,9 @@ struct SlamConfig {
   /// After this many refused frames in a row the result is accepted anyway (the prior, not the
   /// planes, is then the likelier culprit) [frames].
   int prior_gate_max_refusals = 3;
-  /// On degenerate frames update the velocity only along the directions the planes determined
-  /// (all of it held on refused frames) instead of re-estimating it from a result whose open
-  /// directions came from the prior itself (feedback: a bias there grows frame after frame).
+  /// Keep the last well-determined velocity on degenerate (and refused) frames instead of
+  /// re-estimating it from a result whose open directions came from the prior itself (feedback:
+  /// a bias there grows frame after frame).
   bool hold_velocity_when_degenerate = true;
   /// Fill directions the planes leave open by point-to-plane alignment of the clouds. Off by
   /// default: on the synthetic room (first 320 frames, noise on) it raised ATE from 5.3 to 7.7 cm,
