@@ -4,7 +4,10 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <string>
+
+#include "planeslam/datasets/errors.hpp"
 
 namespace planeslam::test {
 
@@ -27,6 +30,16 @@ inline std::filesystem::path ScratchDir() {
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   return dir;
+}
+
+/// The message of the IoError `f` throws, or "" when it throws none.
+inline std::string ErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const IoError& e) {
+    return e.what();
+  }
+  return "";
 }
 
 }  // namespace planeslam::test

@@ -13,36 +13,20 @@
 #include <string>
 
 #include "planeslam/datasets/image_io.hpp"
+#include "cli_support.hpp"
 #include "test_support.hpp"
 
 namespace planeslam::app {
 namespace {
 
 namespace fs = std::filesystem;
-
-std::string Slurp(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-struct CliResult {
-  int exit_code = -1;
-  std::string out, err;
-};
+using test::CliResult;
+using test::Slurp;
 
 CliResult RunDetect(const std::string& args, const fs::path& dir) {
-  const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
-  const std::string command =
-      std::string(PLANESLAM_BIN) + " detect " + args + " >" + out.string() + " 2>" + err.string();
-  const int status = std::system(command.c_str());
-  CliResult r;
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.out = Slurp(out);
-  r.err = Slurp(err);
-  return r;
+  return test::RunCli("detect " + args, dir);
 }
+
 
 struct TestPlane {
   Eigen::Vector3d n;

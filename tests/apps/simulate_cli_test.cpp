@@ -16,6 +16,7 @@
 #include "planeslam/datasets/image_io.hpp"
 #include "planeslam/datasets/sequence_factory.hpp"
 #include "planeslam/datasets/synthetic_writer.hpp"
+#include "cli_support.hpp"
 #include "test_support.hpp"
 
 namespace planeslam::app {
@@ -23,28 +24,11 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct CliResult {
-  int exit_code = -1;
-  std::string out, err;
-};
-
-std::string Slurp(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using test::CliResult;
+using test::Slurp;
 
 CliResult RunSimulate(const std::string& args, const fs::path& dir) {
-  const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
-  const std::string command = std::string(PLANESLAM_BIN) + " simulate " + args + " >" +
-                              out.string() + " 2>" + err.string();
-  const int status = std::system(command.c_str());
-  CliResult r;
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.out = Slurp(out);
-  r.err = Slurp(err);
-  return r;
+  return test::RunCli("simulate " + args, dir);
 }
 
 /// Width and height from a PNG's IHDR chunk (big-endian at bytes 16..23).

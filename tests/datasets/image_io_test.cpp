@@ -17,14 +17,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const IoError& e) {
-    return e.what();
-  }
-  return "";
-}
+using test::ErrorOf;
 
 // --- A minimal PNG encoder (stored deflate blocks), independent of the code under test. -------
 

@@ -17,14 +17,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const IoError& e) {
-    return e.what();
-  }
-  return "";
-}
+using test::ErrorOf;
 
 void WriteScan(const fs::path& path, const std::vector<LidarPoint>& points) {
   std::ofstream out(path, std::ios::binary);

@@ -20,14 +20,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const IoError& e) {
-    return e.what();
-  }
-  return "";
-}
+using test::ErrorOf;
 
 bool Contains(const std::string& s, const std::string& part) {
   return s.find(part) != std::string::npos;

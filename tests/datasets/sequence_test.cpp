@@ -20,14 +20,7 @@ void WriteText(const fs::path& path, const std::string& text) {
   out << text;
 }
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const IoError& e) {
-    return e.what();
-  }
-  return "";
-}
+using test::ErrorOf;
 
 // ---------------------------------------------------------------------------------------------
 // Real TUM fr3 data.
