@@ -1,5 +1,6 @@
 // `planeslam detect INPUT --out DIR`: planes of one range image (depth PNG or organized PCD).
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -28,50 +29,6 @@ using Clock = std::chrono::steady_clock;
 
 double Ms(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
-}
-
-/// Distinct colour of plane `id` (golden-ratio hue steps, full saturation, bright).
-void PlaneColour(int id, std::uint8_t rgb[3]) {
-  const double h = std::fmod(0.13 + 0.618033988749895 * id, 1.0) * 6.0;
-  const double s = (id % 3 == 0) ? 0.55 : 0.85, v = (id % 2 == 0) ? 0.85 : 1.0;
-  const int i = static_cast<int>(h);
-  const double f = h - i, p = v * (1 - s), q = v * (1 - s * f), t = v * (1 - s * (1 - f));
-  double r, g, b;
-  switch (i % 6) {
-    case 0:
-      r = v;
-      g = t;
-      b = p;
-      break;
-    case 1:
-      r = q;
-      g = v;
-      b = p;
-      break;
-    case 2:
-      r = p;
-      g = v;
-      b = t;
-      break;
-    case 3:
-      r = p;
-      g = q;
-      b = v;
-      break;
-    case 4:
-      r = t;
-      g = p;
-      b = v;
-      break;
-    default:
-      r = v;
-      g = p;
-      b = q;
-      break;
-  }
-  rgb[0] = static_cast<std::uint8_t>(std::lround(255 * r));
-  rgb[1] = static_cast<std::uint8_t>(std::lround(255 * g));
-  rgb[2] = static_cast<std::uint8_t>(std::lround(255 * b));
 }
 
 /// Grey level of each valid pixel from its range (near = light), 0 for invalid pixels.
@@ -111,10 +68,10 @@ std::string PlyBytes(const ds::OrganizedCloud& cloud, const detection::Segmentat
     if (!ds::OrganizedCloud::IsValid(p)) continue;
     const float xyz[3] = {p.x(), p.y(), p.z()};
     std::memcpy(w, xyz, 12);  // x86/ARM hosts are little-endian, as the header says
-    std::uint8_t rgb[3] = {grey[i], grey[i], grey[i]};
     const std::int32_t id = seg.labels[i] >= 1 ? seg.labels[i] : 0;
-    if (id > 0) PlaneColour(id, rgb);
-    std::memcpy(w + 12, rgb, 3);
+    const std::array<std::uint8_t, 3> rgb =
+        id > 0 ? ds::LabelColour(id) : std::array<std::uint8_t, 3>{grey[i], grey[i], grey[i]};
+    std::memcpy(w + 12, rgb.data(), 3);
     std::memcpy(w + 15, &id, 4);
     w += 19;
   }
@@ -236,8 +193,7 @@ class DetectCommand : public Command {
       std::uint8_t* px = &colour.data[3 * i];
       px[0] = px[1] = px[2] = grey[i];
       if (seg.labels[i] >= 1) {
-        std::uint8_t rgb[3];
-        PlaneColour(seg.labels[i], rgb);
+        const std::array<std::uint8_t, 3> rgb = ds::LabelColour(seg.labels[i]);
         for (int c = 0; c < 3; ++c) px[c] = static_cast<std::uint8_t>((3 * rgb[c] + grey[i]) / 4);
       }
     }

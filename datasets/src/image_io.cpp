@@ -3,6 +3,7 @@
 #include <png.h>
 
 #include <algorithm>
+#include <cmath>
 #include <csetjmp>
 #include <cstdio>
 #include <cstring>
@@ -208,6 +209,43 @@ void WritePngRgb(const std::string& path, const ImageRgb8& image) {
                   "image buffer size mismatch");
   WritePng(path, image.width, image.height, PNG_COLOR_TYPE_RGB, 8, image.data.data(),
            static_cast<std::size_t>(image.width) * 3);
+}
+
+std::array<std::uint8_t, 3> LabelColour(int id) {
+  if (id <= 0) return {110, 110, 110};  // no plane: neutral grey
+  // Hue steps by the golden ratio conjugate: consecutive ids get well separated hues; value
+  // alternates so that ids with nearby hues (id and id + 13 or so) still differ.
+  const double h = std::fmod(0.1 + 0.618033988749895 * id, 1.0) * 6.0;
+  const double v = (id % 2 == 0) ? 0.95 : 0.75;
+  const double s = 0.75;
+  const int sector = static_cast<int>(std::floor(h)) % 6;
+  const double f = h - std::floor(h);
+  const double p = v * (1 - s), q = v * (1 - s * f), t = v * (1 - s * (1 - f));
+  double r = 0, g = 0, b = 0;
+  switch (sector) {
+    case 0:
+      r = v, g = t, b = p;
+      break;
+    case 1:
+      r = q, g = v, b = p;
+      break;
+    case 2:
+      r = p, g = v, b = t;
+      break;
+    case 3:
+      r = p, g = q, b = v;
+      break;
+    case 4:
+      r = t, g = p, b = v;
+      break;
+    default:
+      r = v, g = p, b = q;
+      break;
+  }
+  auto byte = [](double x) {
+    return static_cast<std::uint8_t>(std::lround(std::clamp(x, 0.0, 1.0) * 255.0));
+  };
+  return {byte(r), byte(g), byte(b)};
 }
 
 }  // namespace planeslam::datasets

@@ -83,31 +83,6 @@ std::string StampName(double stamp) {
   return buffer;
 }
 
-void LabelColour(int id, std::uint8_t rgb[3]) {
-  if (id <= 0) {
-    rgb[0] = rgb[1] = rgb[2] = 110;
-    return;
-  }
-  // Golden-ratio hue steps keep neighbouring ids apart; saturation/value alternate a little.
-  const double h = std::fmod(id * 0.6180339887498949, 1.0) * 6.0;
-  const double s = (id % 2) ? 0.75 : 0.55, v = (id % 3) ? 0.95 : 0.8;
-  const int sector = static_cast<int>(h) % 6;
-  const double f = h - std::floor(h);
-  const double p = v * (1 - s), q = v * (1 - s * f), t = v * (1 - s * (1 - f));
-  double r = v, g = t, b = p;
-  switch (sector) {
-    case 0: r = v; g = t; b = p; break;
-    case 1: r = q; g = v; b = p; break;
-    case 2: r = p; g = v; b = t; break;
-    case 3: r = p; g = q; b = v; break;
-    case 4: r = t; g = p; b = v; break;
-    default: r = v; g = p; b = q; break;
-  }
-  rgb[0] = static_cast<std::uint8_t>(std::lround(255 * r));
-  rgb[1] = static_cast<std::uint8_t>(std::lround(255 * g));
-  rgb[2] = static_cast<std::uint8_t>(std::lround(255 * b));
-}
-
 ImageRgb8 MakeSyntheticPreview(const SyntheticFrame& frame, double max_range) {
   const OrganizedCloud& cloud = frame.frame.cloud;
   const int w = cloud.width, h = cloud.height;
@@ -133,7 +108,8 @@ ImageRgb8 MakeSyntheticPreview(const SyntheticFrame& frame, double max_range) {
       const double x = std::clamp((range - lo) / span, 0.0, 1.0);
       const auto g = static_cast<std::uint8_t>(std::lround(255.0 - 215.0 * x));
       grey[0] = grey[1] = grey[2] = g;
-      LabelColour(frame.labels.data[i], colour);
+      const auto label_rgb = LabelColour(frame.labels.data[i]);
+      std::copy(label_rgb.begin(), label_rgb.end(), colour);
     }
   }
   return image;

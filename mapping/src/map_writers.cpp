@@ -9,6 +9,7 @@
 
 #include "planeslam/datasets/atomic_file.hpp"
 #include "planeslam/datasets/errors.hpp"
+#include "planeslam/datasets/image_io.hpp"
 
 namespace planeslam::mapping {
 namespace {
@@ -120,41 +121,7 @@ void WritePly(const std::string& path, const std::vector<Eigen::Vector3f>& verti
 
 }  // namespace
 
-Rgb8 PlaneColor(int id) {
-  // Hue steps by the golden ratio conjugate: consecutive ids get well separated hues; value
-  // alternates so that ids with nearby hues (id and id + 13 or so) still differ.
-  const double h = std::fmod(0.1 + 0.618033988749895 * id, 1.0) * 6.0;
-  const double v = (id % 2 == 0) ? 0.95 : 0.75;
-  const double s = 0.75;
-  const int sector = static_cast<int>(std::floor(h)) % 6;
-  const double f = h - std::floor(h);
-  const double p = v * (1 - s), q = v * (1 - s * f), t = v * (1 - s * (1 - f));
-  double r = 0, g = 0, b = 0;
-  switch (sector) {
-    case 0:
-      r = v, g = t, b = p;
-      break;
-    case 1:
-      r = q, g = v, b = p;
-      break;
-    case 2:
-      r = p, g = v, b = t;
-      break;
-    case 3:
-      r = p, g = q, b = v;
-      break;
-    case 4:
-      r = t, g = p, b = v;
-      break;
-    default:
-      r = v, g = p, b = q;
-      break;
-  }
-  auto byte = [](double x) {
-    return static_cast<std::uint8_t>(std::lround(std::clamp(x, 0.0, 1.0) * 255.0));
-  };
-  return {byte(r), byte(g), byte(b)};
-}
+Rgb8 PlaneColor(int id) { return datasets::LabelColour(id); }
 
 std::vector<MapPlaneRecord> MakeMapRecords(const PlaneMap& map, int min_observations,
                                            double min_area) {

@@ -1,6 +1,8 @@
 // Synthetic sequences on disk: read back through the TUM / PCD readers with exact ground truth,
 // labels and planes.json, and byte-identical files for identical seeds.
 #include <gtest/gtest.h>
+
+#include <algorithm>
 #include <nlohmann/json.hpp>
 
 #include <cmath>
@@ -159,7 +161,8 @@ TEST(SyntheticWriter, PreviewShowsDepthAndLabels) {
       const std::uint8_t* colour = grey + 3 * w;
       std::uint8_t expected[3] = {0, 0, 0};
       if (OrganizedCloud::IsValid(f.frame.cloud.points[i])) {
-        LabelColour(f.labels.data[i], expected);
+        const auto label_rgb = LabelColour(f.labels.data[i]);
+        std::copy(label_rgb.begin(), label_rgb.end(), expected);
         EXPECT_GT(grey[0], 0);
         EXPECT_TRUE(grey[0] == grey[1] && grey[1] == grey[2]);
       } else {

@@ -1,6 +1,7 @@
 #pragma once
 /// PNG images in and out (libpng). Reads validate size and bit depth and throw IoError naming the
 /// file; writes go to a temporary name and are renamed into place (no half-written files).
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -35,5 +36,9 @@ Image16 DecodePng16(const std::string& bytes, const std::string& name);
 void WritePng16(const std::string& path, const Image16& image);
 /// Writes an 8-bit RGB PNG atomically.
 void WritePngRgb(const std::string& path, const ImageRgb8& image);
+
+/// The colour every planeslam output gives plane label `id` (label images, previews, plane-map
+/// meshes): golden-ratio hue steps, stable across runs; id <= 0 (no plane) is grey.
+std::array<std::uint8_t, 3> LabelColour(int id);
 
 }  // namespace planeslam::datasets

@@ -44,8 +44,6 @@ SyntheticWriteSummary WriteSyntheticSequence(
 /// curved surfaces, black = none) side by side, 2 * width x height.
 ImageRgb8 MakeSyntheticPreview(const SyntheticFrame& frame, double max_range);
 
-/// The colour of plane label `id` in previews (0 = grey); stable across runs.
-void LabelColour(int id, std::uint8_t rgb[3]);
 
 /// planes.json text for a scene (world frame).
 std::string SyntheticPlanesJson(const SyntheticScene& scene);
