@@ -84,7 +84,8 @@ void SlamSystem::AddKeyframe(std::size_t frame, const Pose& T_world_sensor,
   graph_.AddNode(keyframe.id, T_world_sensor, /*fixed=*/keyframe.id == 0);
   keyframes_.push_back(std::move(keyframe));
   keyframe_frames_.push_back(frame);
-  keyframe_cloud_ = cloud;
+  // Kept only for the point-to-plane fill of degenerate directions (a full-resolution copy).
+  if (config_.point_to_plane_fill) keyframe_cloud_ = cloud;
   ++stats_.keyframes;
   const auto start = std::chrono::steady_clock::now();
   map_.AddFrame(keyframes_.back().id, T_world_sensor, segmentation, cloud);
