@@ -8,6 +8,7 @@
 #include <iostream>
 #include <map>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "bench_common.hpp"
@@ -29,6 +30,16 @@ using bench::BenchFrame;
 using bench::Method;
 
 /// Timing of one method on one frame.
+using StageTimes = std::vector<std::pair<std::string, std::vector<double>>>;
+
+/// The samples of `stage` in `stages`, appended (keeping first-seen order) when new.
+std::vector<double>& StageSamples(StageTimes& stages, const std::string& stage) {
+  for (auto& [name, samples] : stages) {
+    if (name == stage) return samples;
+  }
+  return stages.emplace_back(stage, std::vector<double>()).second;
+}
+
 struct DetectRecord {
   std::string method;
   std::string frame;
@@ -38,6 +49,8 @@ struct DetectRecord {
   std::size_t valid_points = 0;
   int width = 0, height = 0;
   double median_ms = 0.0, min_ms = 0.0;
+  /// The detector's own stage times [ms] over the repetitions, in the detector's stage order.
+  StageTimes stages_ms;
 };
 
 std::string Fmt(const char* format, double v) {
@@ -171,6 +184,7 @@ class BenchCommand : public Command {
           if (StopRequested()) return 130;
           detection::Segmentation seg;
           per[m].times_ms.push_back(bench::TimedDetect(methods[m], frame.cloud, &seg));
+          AddStageTimes(seg, per[m]);
           if (r == 0) {
             per[m].planes = static_cast<int>(seg.planes.size());
             per[m].assigned = bench::AssignedFraction(frame.cloud, seg);
@@ -195,6 +209,10 @@ class BenchCommand : public Command {
     if (!json_path_.empty()) WriteDetectJson(records);
     if (!plot_dir_.empty()) WriteDetectPlots(methods, records);
     return 0;
+  }
+
+  static void AddStageTimes(const detection::Segmentation& seg, DetectRecord& rec) {
+    for (const auto& [stage, ms] : seg.timings_ms) StageSamples(rec.stages_ms, stage).push_back(ms);
   }
 
   /// Per-frame PCL/method ratio of median times, keyed by method.
@@ -262,6 +280,22 @@ class BenchCommand : public Command {
                   100.0 * bench::Median(assigned),
                   std::isnan(ratio) ? "-" : Fmt("%.1fx", ratio).c_str(),
                   std::isnan(of_medians) ? "-" : Fmt("%.1fx", of_medians).c_str());
+    }
+    // Where the time goes: per method, each stage's median over frames of its per-frame median.
+    std::printf("\nstages (median over frames of the per-frame median ms):\n");
+    for (const Method& m : methods) {
+      StageTimes stages;
+      for (const auto& r : records) {
+        if (r.method != m.name) continue;
+        for (const auto& [stage, times] : r.stages_ms) {
+          StageSamples(stages, stage).push_back(bench::Median(times));
+        }
+      }
+      std::printf("  %-12s", m.name.c_str());
+      for (const auto& [stage, medians] : stages) {
+        std::printf(" %s %.2f", stage.c_str(), bench::Median(medians));
+      }
+      std::printf("\n");
     }
     std::printf(
         "\nmedian ms = median over frames of each frame's median time; min ms = median over frames "

@@ -54,9 +54,50 @@ void SymEigenvalues3(const double c[6], double& l1, double& l2, double& l3) {
   if (l3 < l2) std::swap(l2, l3);
 }
 
+namespace {
+
+/// Eigenvalues of a positive semi-definite C whose smallest one is well separated (the common case
+/// in plane fitting), without trigonometry: Newton on the characteristic polynomial
+/// p(l) = l^3 - t l^2 + m l - det from l = 0. p is increasing and concave on [0, l1] (p'' = 6 l - 2 t
+/// < 0 below t/3 >= l1), so the iterates rise monotonically to l1 with no overshoot, quadratically
+/// once near it; l2, l3 then solve l2 + l3 = t - l1, l2 l3 = m - l1 (t - l1). Returns false (use
+/// the closed form) when C is not PSD or l1 is too close to l2 to converge in a few steps.
+bool SymEigenvaluesNewton(const double c[6], double& l1, double& l2, double& l3) {
+  const double t = c[0] + c[3] + c[5];
+  const double m00 = c[3] * c[5] - c[4] * c[4], m11 = c[0] * c[5] - c[2] * c[2],
+               m22 = c[0] * c[3] - c[1] * c[1];
+  const double m = m00 + m11 + m22;
+  const double det =
+      c[0] * m00 + c[1] * (c[2] * c[4] - c[1] * c[5]) + c[2] * (c[1] * c[4] - c[2] * c[3]);
+  if (!(t > 0) || !(m > 0) || det < 0) return false;
+  double l = 0.0;
+  bool converged = false;
+  for (int it = 0; it < 6; ++it) {
+    const double p = ((l - t) * l + m) * l - det;
+    const double dp = (3.0 * l - 2.0 * t) * l + m;
+    if (!(dp > 0)) return false;
+    const double step = -p / dp;
+    l += step;
+    if (std::abs(step) <= 1e-14 * t) {
+      converged = true;
+      break;
+    }
+  }
+  if (!converged) return false;
+  const double s = t - l;         // l2 + l3
+  const double prod = m - l * s;  // l2 l3
+  const double disc = std::sqrt(std::max(0.0, s * s - 4.0 * prod));
+  l3 = 0.5 * (s + disc);
+  l2 = l3 > 0 ? prod / l3 : 0.0;  // not (s - disc) / 2, which cancels when l2 << l3
+  l1 = l;
+  return l1 <= l2 && l2 <= l3;
+}
+
+}  // namespace
+
 SymEigen3 SymEigen3Smallest(const double c[6]) {
   SymEigen3 e;
-  SymEigenvalues3(c, e.l1, e.l2, e.l3);
+  if (!SymEigenvaluesNewton(c, e.l1, e.l2, e.l3)) SymEigenvalues3(c, e.l1, e.l2, e.l3);
   const Eigen::Vector3d r0(c[0] - e.l1, c[1], c[2]);
   const Eigen::Vector3d r1(c[1], c[3] - e.l1, c[4]);
   const Eigen::Vector3d r2(c[2], c[4], c[5] - e.l1);

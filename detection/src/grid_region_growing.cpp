@@ -25,8 +25,11 @@ struct CellInfo {
   Eigen::Vector3d m = Eigen::Vector3d::Zero();  ///< mass centre [m]
   double mse = 0.0;                             ///< [m^2]
   double cos_tol = 1.0;    ///< eta test: |n_GR . n_g| must exceed this (-1 = no test)
-  double angle_tol = 0.0;  ///< the same tolerance as an angle [rad]
+  double sin_tol = 0.0;    ///< sine of the same tolerance (widening it by a tilt needs both)
 };
+
+/// How many queue places ahead the growth prefetches grid data.
+constexpr std::size_t kPrefetchAhead = 6;
 
 /// Per-thread buffers reused across frames (no allocation per frame once warmed up).
 struct Workspace {
@@ -91,61 +94,62 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   const Eigen::Vector3f* pts = cloud.points.data();
   Workspace& ws = ThreadWorkspace();
 
-  // ---- 1. Per-grid moments in one pass over the cloud (row by row, so memory is read linearly).
+  // ---- 1. Per-grid moments, one grid at a time: its k rows are k short runs inside a band of k
+  // image rows that stays in L1, and each grid's sums are written once (no read-modify-write
+  // per row, no separate clearing pass).
   const auto t0 = Clock::now();
-  ws.sums.assign(num_cells, MomentSums());
+  ws.sums.resize(num_cells);
   const double s0 = params_.sigma0, s2 = params_.sigma_z2;
-  for (int y = 0; y < height; ++y) {
-    const Eigen::Vector3f* row = pts + static_cast<std::size_t>(y) * width;
-    MomentSums* crow = ws.sums.data() + static_cast<std::size_t>(y / k) * cells_x;
+  for (int cy = 0; cy < cells_y; ++cy) {
+    const int y0 = cy * k, y1 = std::min(height, y0 + k);
+    MomentSums* crow = ws.sums.data() + static_cast<std::size_t>(cy) * cells_x;
     for (int cx = 0; cx < cells_x; ++cx) {
       const int x0 = cx * k, x1 = std::min(width, x0 + k);
-      // K, S, Q only (10 sums); the noise moment W of the grid is set from its centre below.
+      // K, S, Q (10 sums); the noise moment W of the grid is set from its centre below.
       double k_ = 0, sx = 0, sy = 0, sz = 0, xx = 0, xy = 0, xz = 0, yy = 0, yz = 0, zz = 0;
-      for (int x = x0; x < x1; ++x) {
-        const Eigen::Vector3f& p = row[x];
-        if (!std::isfinite(p.z())) continue;
-        const double px = p.x(), py = p.y(), pz = p.z();
-        k_ += 1.0;
-        sx += px;
-        sy += py;
-        sz += pz;
-        xx += px * px;
-        xy += px * py;
-        xz += px * pz;
-        yy += py * py;
-        yz += py * pz;
-        zz += pz * pz;
+      for (int y = y0; y < y1; ++y) {
+        const Eigen::Vector3f* row = pts + static_cast<std::size_t>(y) * width;
+        for (int x = x0; x < x1; ++x) {
+          const Eigen::Vector3f& p = row[x];
+          if (!std::isfinite(p.z())) continue;
+          const double px = p.x(), py = p.y(), pz = p.z();
+          k_ += 1.0;
+          sx += px;
+          sy += py;
+          sz += pz;
+          xx += px * px;
+          xy += px * py;
+          xz += px * pz;
+          yy += py * py;
+          yz += py * pz;
+          zz += pz * pz;
+        }
       }
-      if (k_ > 0) {
-        MomentSums& m = crow[cx];
-        m.k += k_;
-        m.sx += sx;
-        m.sy += sy;
-        m.sz += sz;
-        m.xx += xx;
-        m.xy += xy;
-        m.xz += xz;
-        m.yy += yy;
-        m.yz += yz;
-        m.zz += zz;
-      }
+      MomentSums& m = crow[cx];
+      m = MomentSums();
+      if (k_ <= 0) continue;
+      m.k = k_;
+      m.sx = sx;
+      m.sy = sy;
+      m.sz = sz;
+      m.xx = xx;
+      m.xy = xy;
+      m.xz = xz;
+      m.yy = yy;
+      m.yz = yz;
+      m.zz = zz;
+      // Noise moment: W = w(z) Q with w = (sigma(z)/z)^2 at the grid's centre (within a k x k
+      // grid z varies by ~1 %, so this equals the per-pixel sum to ~2 %; the refinement and the
+      // final planes use per-pixel weights).
+      const double z = spherical ? m.Centroid().norm() : sz / k_;
+      const double w = z > 0 ? (s0 + s2 * z * z) * (s0 + s2 * z * z) / (z * z) : 0.0;
+      m.wxx = w * xx;
+      m.wxy = w * xy;
+      m.wxz = w * xz;
+      m.wyy = w * yy;
+      m.wyz = w * yz;
+      m.wzz = w * zz;
     }
-  }
-
-  // Noise moment of each grid: W = w(z) Q with w = (sigma(z)/z)^2 at the grid's centre (within a
-  // k x k grid z varies by ~1 %, so this equals the per-pixel sum to ~2 %; the refinement and the
-  // final planes use per-pixel weights).
-  for (MomentSums& m : ws.sums) {
-    if (m.k <= 0) continue;
-    const double z = spherical ? m.Centroid().norm() : m.sz / m.k;
-    const double w = z > 0 ? (s0 + s2 * z * z) * (s0 + s2 * z * z) / (z * z) : 0.0;
-    m.wxx = w * m.xx;
-    m.wxy = w * m.xy;
-    m.wxz = w * m.xz;
-    m.wyy = w * m.yy;
-    m.wyz = w * m.yz;
-    m.wzz = w * m.zz;
   }
 
   // ---- 2. Shape classification (Section III-A) and the planar grids' planes.
@@ -194,15 +198,14 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     if (depth_model) {
       // Normal noise of a small grid: std ~ sigma_n / sqrt(l2) [rad].
       const double ang = eta + params_.eta_sigmas * std::sqrt(noise_mse / std::max(e.l2, 1e-18));
-      ci.angle_tol = ang;
       ci.cos_tol = ang >= 0.5 * M_PI ? -1.0 : std::cos(ang);
+      ci.sin_tol = ang >= 0.5 * M_PI ? 1.0 : std::sin(ang);
       // Seed order under the noise model: the paper's minimal MSE, plus the ray noise leaking in
       // through the grid's normal uncertainty, so that grids whose normal is mostly noise (far
       // away, where a fluke can give a tiny MSE with a random normal) seed last.
       const double tilt = std::min(1.0, s.NormalTilt(e.l2));
       ws.seeds.push_back(seed_key(mse + s.IsotropicMse() * tilt * tilt, c));
     } else {
-      ci.angle_tol = eta;
       ci.cos_tol = cos_eta;
       ws.seeds.push_back(seed_key(mse, c));  // Algorithm 2 line 4: minimal MSE first
     }
@@ -210,7 +213,6 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
 
   // ---- 3. Region growing (Algorithm 2): seeds in order of grid MSE, BFS over 4-neighbours.
   const auto t2 = Clock::now();
-  std::sort(ws.seeds.begin(), ws.seeds.end());
   ws.cell_region.assign(num_cells, -1);
   ws.used.assign(num_cells, 0);
   ws.queued.assign(num_cells, -1);
@@ -218,12 +220,21 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   const std::size_t theta_grids = static_cast<std::size_t>((params_.theta + k * k - 1) / (k * k));
   const int dx[4] = {1, -1, 0, 0};
   const int dy[4] = {0, 0, 1, -1};
-  for (const std::uint64_t key : ws.seeds) {
-    const int seed = static_cast<int>(key & 0xffffffffu);
-    if (ws.used[seed]) continue;  // already in R or R'
+  auto grow_from = [&](int seed) {
     const int r = static_cast<int>(ws.regions.size());
     MomentSums region = ws.sums[seed];
     FastFit fit = FitSums(region);
+    // The region normal's own uncertainty (depth model), kept with the fit: the tilt [rad] and
+    // its cosine and sine, which widen every grid's angle tolerance.
+    double tilt = 0.0, cos_tilt = 1.0, sin_tilt = 0.0;
+    auto update_tilt = [&](double raw_tilt) {
+      tilt = std::min(1.0, raw_tilt);
+      if (tilt > 0.02) {  // below, the tests ignore the tilt (see there)
+        cos_tilt = std::cos(tilt);
+        sin_tilt = std::sin(tilt);
+      }
+    };
+    if (depth_model) update_tilt(region.NormalTilt(fit.l2));
     ws.members.clear();
     ws.members.push_back(seed);
     ws.cell_region[seed] = r;
@@ -246,6 +257,15 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     while (head < ws.queue.size()) {
       const int g = ws.queue[head++];
       ws.queued[g] = -1;  // may be queued again by a later neighbour if rejected now
+      // The wavefront of a large region spans more grids than the cache holds: fetch the data of
+      // the grids a few places ahead in the queue while this one is tested.
+      if (head + kPrefetchAhead < ws.queue.size()) {
+        const int ahead = ws.queue[head + kPrefetchAhead];
+        __builtin_prefetch(&ws.info[ahead]);
+        __builtin_prefetch(reinterpret_cast<const char*>(&ws.info[ahead]) + 64);
+        __builtin_prefetch(&ws.sums[ahead]);
+        __builtin_prefetch(reinterpret_cast<const char*>(&ws.sums[ahead]) + 64);
+      }
       if (ws.used[g]) continue;
       const CellInfo& ci = ws.info[g];
       // Algorithm 2 line 8: angle, coplanarity, then the merged MSE (the only one needing a fit).
@@ -257,11 +277,11 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         // A young region's own normal is uncertain (tilt, 2 sigma): widen the angle test by it
         // and let the coplanarity test allow tilt x lateral distance, so that a seed with a
         // noisy normal corrects itself by growing instead of growing a strip along its error.
-        const double tilt = std::min(1.0, region.NormalTilt(fit.l2));
         const double dot = std::abs(fit.normal.dot(ci.n));
         if (tilt > 0.02) {
-          const double ang = ci.angle_tol + tilt;
-          if (ang < 0.5 * M_PI && dot <= std::cos(ang)) continue;
+          // cos(tolerance + tilt); the sum stays below 3 pi / 2, so cos > 0 iff it is < pi / 2.
+          const double cos_ang = ci.cos_tol * cos_tilt - ci.sin_tol * sin_tilt;
+          if (ci.cos_tol >= 0 && cos_ang > 0 && dot <= cos_ang) continue;
         } else if (dot <= ci.cos_tol)
           continue;
         const double lateral = std::sqrt(std::max(0.0, diff.squaredNorm() - off * off));
@@ -275,11 +295,12 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       MomentSums merged = region;
       merged.Merge(gs);
       const FastFit merged_fit = RefitFrom(merged, fit.normal);
-      const double expected =
-          merged.EffectiveMse(merged_fit.normal, merged.NormalTilt(merged_fit.l2));
+      const double merged_tilt = merged.NormalTilt(merged_fit.l2);
+      const double expected = merged.EffectiveMse(merged_fit.normal, merged_tilt);
       if (merged_fit.mse >= params_.Epsilon(expected)) continue;
       region = merged;
       fit = merged_fit;  // eq. (5): plane parameters updated on every join
+      if (depth_model) update_tilt(merged_tilt);
       ws.cell_region[g] = r;
       ws.used[g] = 1;
       ws.members.push_back(g);
@@ -292,6 +313,28 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       // later regions (letting later regions re-grow into them made the growth quadratic on
       // cluttered scans). Boundary refinement may still give their pixels to a plane.
       for (int c : ws.members) ws.cell_region[c] = -1;
+    }
+  };
+  // Seeds in key order. Most grids join one of the first regions, so instead of sorting every key
+  // up front the keys are taken in chunks: the smallest chunk is selected (nth_element) and sorted,
+  // its seeds are grown, and the keys of grids used meanwhile are dropped before the next chunk.
+  // Keys are unique (grid index in the low bits), so the order is exactly that of a full sort.
+  std::vector<std::uint64_t>& seeds = ws.seeds;
+  std::size_t next = 0;
+  while (next < seeds.size()) {
+    seeds.erase(std::remove_if(seeds.begin() + static_cast<std::ptrdiff_t>(next), seeds.end(),
+                               [&](std::uint64_t key) { return ws.used[key & 0xffffffffu] != 0; }),
+                seeds.end());
+    if (next >= seeds.size()) break;
+    const std::size_t chunk = std::max<std::size_t>(256, (seeds.size() - next) / 8);
+    const std::size_t end = std::min(seeds.size(), next + chunk);
+    const auto first = seeds.begin() + static_cast<std::ptrdiff_t>(next);
+    const auto last = seeds.begin() + static_cast<std::ptrdiff_t>(end);
+    if (last != seeds.end()) std::nth_element(first, last, seeds.end());
+    std::sort(first, last);
+    for (; next < end; ++next) {
+      const int seed = static_cast<int>(seeds[next] & 0xffffffffu);
+      if (!ws.used[seed]) grow_from(seed);  // else already in R or R'
     }
   }
 
@@ -358,17 +401,20 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
             if (!std::isfinite(pf.z())) continue;
             const Eigen::Vector3d p = pf.cast<double>();
             const double z = internal::PointDepth(pf, spherical);
-            const double rel = params_.Sigma(z) / z;
+            const double rel = s0 == 0.0 ? s2 * z : params_.Sigma(z) / z;  // sigma(z) / z
+            // Smallest |n.p - d| / tol, compared as best_dist * tol < dist * best_tol (no
+            // division); starts at ratio 1, i.e. beyond tolerance = no plane.
             int best = -1;
-            double best_ratio = 1.0;
+            double best_dist = 1.0, best_tol = 1.0;
             for (int i = 0; i < n_adj; ++i) {
               const FastFit& f = ws.fits[adj[i]];
               const double np = f.normal.dot(p);
               const double tol =
                   depth_model ? params_.gamma + rs * rel * std::abs(np) : params_.gamma;
-              const double ratio = std::abs(np - f.d) / tol;
-              if (ratio < best_ratio) {
-                best_ratio = ratio;
+              const double dist = std::abs(np - f.d);
+              if (dist * best_tol < best_dist * tol) {
+                best_dist = dist;
+                best_tol = tol;
                 best = adj[i];
               }
             }

@@ -25,23 +25,25 @@ void MergeAdjacentRegions(std::vector<std::int32_t>& labels, int width, int heig
   const int n = static_cast<int>(regions.size());
   if (n < 2) return;
   // Adjacent pairs from right and down neighbours, packed into 64-bit keys, sorted unique.
+  // A border between two regions repeats the same pair along its length: skip a pair equal to the
+  // last one recorded, so the list to sort is about one entry per border run, not per pixel.
   std::vector<std::uint64_t> pairs;
+  std::uint64_t last = ~std::uint64_t{0};
+  auto record = [&](std::int32_t a, std::int32_t b) {
+    const auto lo = static_cast<std::uint64_t>(std::min(a, b));
+    const auto hi = static_cast<std::uint64_t>(std::max(a, b));
+    const std::uint64_t key = lo << 32 | hi;
+    if (key != last) pairs.push_back(key);
+    last = key;
+  };
   for (int y = 0; y < height; ++y) {
     const std::int32_t* row = labels.data() + static_cast<std::size_t>(y) * width;
     const std::int32_t* below = y + 1 < height ? row + width : nullptr;
     for (int x = 0; x < width; ++x) {
       const std::int32_t a = row[x];
       if (a < 0) continue;
-      if (x + 1 < width && row[x + 1] >= 0 && row[x + 1] != a) {
-        const auto lo = static_cast<std::uint64_t>(std::min(a, row[x + 1]));
-        const auto hi = static_cast<std::uint64_t>(std::max(a, row[x + 1]));
-        pairs.push_back(lo << 32 | hi);
-      }
-      if (below && below[x] >= 0 && below[x] != a) {
-        const auto lo = static_cast<std::uint64_t>(std::min(a, below[x]));
-        const auto hi = static_cast<std::uint64_t>(std::max(a, below[x]));
-        pairs.push_back(lo << 32 | hi);
-      }
+      if (x + 1 < width && row[x + 1] >= 0 && row[x + 1] != a) record(a, row[x + 1]);
+      if (below && below[x] >= 0 && below[x] != a) record(a, below[x]);
     }
   }
   if (pairs.empty()) return;

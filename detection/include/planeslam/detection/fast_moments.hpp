@@ -127,9 +127,11 @@ struct SymEigen3 {
 
 /// Eigenvalues only (trigonometric closed form, Smith 1961), ascending. `c` = upper triangle.
 void SymEigenvalues3(const double c[6], double& l1, double& l2, double& l3);
-/// Eigenvalues and the eigenvector of the smallest one (cross product of two rows of C - l1 I,
-/// choosing the best-conditioned pair); l1 is then refined as the Rayleigh quotient v1^T C v1,
-/// which is accurate to round-off even when l1 << l3.
+/// Eigenvalues and the eigenvector of the smallest one. The eigenvalues come from Newton's method
+/// on the characteristic polynomial when l1 is well separated (planar sets: no trigonometry),
+/// else from SymEigenvalues3; the eigenvector is the cross product of two rows of C - l1 I
+/// (the best-conditioned pair), and l1 is refined as the Rayleigh quotient v1^T C v1, which is
+/// accurate to round-off even when l1 << l3.
 SymEigen3 SymEigen3Smallest(const double c[6]);
 
 /// Plane fitted to moment sums (eq. 3-6): unit normal oriented so that d = n.m >= 0.
