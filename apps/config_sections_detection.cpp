@@ -46,6 +46,9 @@ void VisitDetection(FieldVisitor& v, DetectionSection& c) {
   v.Field("merge_regions", p.merge_regions, "merge adjacent regions that describe one surface");
   v.Field("merge_angle_deg", p.merge_angle_deg, "merging: max angle between normals [deg]", 0.0,
           89.99);
+  v.Field("merge_disjoint", p.merge_disjoint,
+          "merging: also merge regions that do not touch (a surface seen on both sides of an "
+          "occluder)");
 }
 
 std::vector<std::string> ValidateDetection(const DetectionSection& c) {

@@ -429,7 +429,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // ---- 5. Merge adjacent regions that are one surface; final planes from all their pixels.
   const auto t4 = Clock::now();
   if (params_.merge_regions) {
-    internal::MergeAdjacentRegions(ws.labels, width, height, ws.regions, params_);
+    internal::MergeCoplanarRegions(ws.labels, width, height, ws.regions, params_);
   }
   internal::FinalizeSegmentation(ws.labels, width, height, ws.regions, out);
   out.cell_classes = ws.classes;

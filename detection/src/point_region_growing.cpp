@@ -258,7 +258,7 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
 
   const auto t2 = Clock::now();
   if (params_.merge_regions) {
-    internal::MergeAdjacentRegions(ws.labels, width, height, ws.regions, params_);
+    internal::MergeCoplanarRegions(ws.labels, width, height, ws.regions, params_);
   }
   internal::FinalizeSegmentation(ws.labels, width, height, ws.regions, out);
   const auto t3 = Clock::now();

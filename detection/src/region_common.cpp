@@ -20,7 +20,7 @@ int Find(std::vector<int>& parent, int a) {
 
 }  // namespace
 
-void MergeAdjacentRegions(std::vector<std::int32_t>& labels, int width, int height,
+void MergeCoplanarRegions(std::vector<std::int32_t>& labels, int width, int height,
                           std::vector<MomentSums>& regions, const DetectionParams& params) {
   const int n = static_cast<int>(regions.size());
   if (n < 2) return;
@@ -46,13 +46,24 @@ void MergeAdjacentRegions(std::vector<std::int32_t>& labels, int width, int heig
       if (below && below[x] >= 0 && below[x] != a) record(a, below[x]);
     }
   }
+  const double cos_merge = std::cos(params.merge_angle_deg * M_PI / 180.0);
+  std::vector<FastFit> fits(n);
+  for (int i = 0; i < n; ++i) fits[i] = FitSums(regions[i]);
+  if (params.merge_disjoint) {
+    // Regions that do not touch can still be one plane: a floor or wall seen on both sides of an
+    // occluder. Every pair of near-parallel regions is a candidate; the union-MSE test decides.
+    for (int a = 0; a < n; ++a) {
+      if (regions[a].k < 3) continue;
+      for (int b = a + 1; b < n; ++b) {
+        if (regions[b].k < 3 || std::abs(fits[a].normal.dot(fits[b].normal)) < cos_merge) continue;
+        pairs.push_back(static_cast<std::uint64_t>(a) << 32 | static_cast<std::uint64_t>(b));
+      }
+    }
+  }
   if (pairs.empty()) return;
   std::sort(pairs.begin(), pairs.end());
   pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
 
-  const double cos_merge = std::cos(params.merge_angle_deg * M_PI / 180.0);
-  std::vector<FastFit> fits(n);
-  for (int i = 0; i < n; ++i) fits[i] = FitSums(regions[i]);
   // Candidate pairs ordered by the MSE of their union (the most obviously one surface first).
   std::vector<std::tuple<double, int, int>> cand;
   for (std::uint64_t key : pairs) {

@@ -16,12 +16,13 @@ inline float PointDepth(const Eigen::Vector3f& p, bool spherical) {
   return spherical ? p.norm() : p.z();
 }
 
-/// Merges adjacent regions (4-connected in the label image) that describe one surface: normals
-/// within merge_angle_deg and MSE of the union below epsilon (of the union's noise). Pairs are
-/// tried in order of increasing union MSE (deterministic; ties by region indices); a merged region
-/// keeps the smaller index. `labels` holds region indices (-1 none) and is rewritten; merged-away
+/// Merges regions that describe one plane: adjacent ones (4-connected in the label image) and,
+/// with params.merge_disjoint, also ones that do not touch; the test is normals within
+/// merge_angle_deg and MSE of the union below epsilon (of the union's noise). Pairs are tried in
+/// order of increasing union MSE (deterministic; ties by region indices); a merged region keeps
+/// the smaller index. `labels` holds region indices (-1 none) and is rewritten; merged-away
 /// regions get k = 0 in `regions`.
-void MergeAdjacentRegions(std::vector<std::int32_t>& labels, int width, int height,
+void MergeCoplanarRegions(std::vector<std::int32_t>& labels, int width, int height,
                           std::vector<MomentSums>& regions, const DetectionParams& params);
 
 /// Builds the output: one Plane per region with k >= 3 (sorted by point count descending, then by

@@ -18,7 +18,9 @@ constexpr double kDegToRad = M_PI / 180.0;
 constexpr double kExtentRebuildAngleDeg = 1.0;
 
 std::int64_t CellKey(std::int64_t i, std::int64_t j) {
-  return (i << 32) ^ static_cast<std::int64_t>(static_cast<std::uint32_t>(j));
+  // Shifted as unsigned: a left shift of a negative signed value is undefined behaviour.
+  return static_cast<std::int64_t>(static_cast<std::uint64_t>(i) << 32 ^
+                                   static_cast<std::uint64_t>(static_cast<std::uint32_t>(j)));
 }
 
 std::int64_t FloorIndex(double x, double cell) {

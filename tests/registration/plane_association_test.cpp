@@ -69,7 +69,7 @@ std::set<std::pair<int, int>> AsSet(const std::vector<PlaneMatch>& m) {
 std::vector<detection::Plane> RandomPlanes(int count, std::mt19937& rng) {
   std::uniform_real_distribution<double> ud(0.5, 5.0);
   std::vector<detection::Plane> out;
-  for (int k = 0; k < count; ++k) out.push_back(MakePlane(RandomUnit(rng), ud(rng)));
+  for (int k = 0; k < count; ++k) out.push_back(test::RandomPlane(rng, ud));
   return out;
 }
 
@@ -81,8 +81,11 @@ TEST(PlaneAssociation, FindsTheTrueMatchesAmongUnmatchedPlanes) {
   const int trials = 100;
   for (int trial = 0; trial < trials; ++trial) {
     const Pose T = RandomPose(rng, 0.15, 8.0 * M_PI / 180.0);
-    const Scene s = MakeScene(RandomPlanes(count(rng), rng), RandomPlanes(extra(rng), rng),
-                              RandomPlanes(extra(rng), rng), T, rng);
+    // One draw per statement (argument evaluation order differs between compilers).
+    const auto shared = RandomPlanes(count(rng), rng);
+    const auto only_prev = RandomPlanes(extra(rng), rng);
+    const auto only_curr = RandomPlanes(extra(rng), rng);
+    const Scene s = MakeScene(shared, only_prev, only_curr, T, rng);
     const auto t0 = std::chrono::steady_clock::now();
     const AssociationResult a = AssociatePlanes(s.prev, s.curr, MotionPrior());
     total_ms +=
@@ -104,8 +107,10 @@ TEST(PlaneAssociation, FindsTheTrueMatchesUnderNoise) {
   const int trials = 100;
   for (int trial = 0; trial < trials; ++trial) {
     const Pose T = RandomPose(rng, 0.15, 8.0 * M_PI / 180.0);
-    const Scene s = MakeScene(RandomPlanes(count(rng), rng), RandomPlanes(extra(rng), rng),
-                              RandomPlanes(extra(rng), rng), T, rng, 0.004);
+    const auto shared = RandomPlanes(count(rng), rng);
+    const auto only_prev = RandomPlanes(extra(rng), rng);
+    const auto only_curr = RandomPlanes(extra(rng), rng);
+    const Scene s = MakeScene(shared, only_prev, only_curr, T, rng, 0.004);
     const AssociationResult a = AssociatePlanes(s.prev, s.curr, MotionPrior());
     const auto found = AsSet(a.matches);
     // No false match may get through; missing one (a random plane nearly parallel to another)

@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Eigenvalues>
+
 #include <algorithm>
 #include <numeric>
 #include <random>
@@ -51,8 +53,8 @@ Scene MakeScene(const std::vector<detection::Plane>& curr_planes, const Pose& T_
       s.prev[perm_a[i]] = MovePlane(curr_planes[i], T_prev_curr);
       s.matches.push_back({perm_a[i], perm_b[i], false});
     } else {  // seen in one frame only
-      s.curr[perm_b[i]] = MakePlane(RandomUnit(rng), ud(rng));
-      s.prev[perm_a[i]] = MakePlane(RandomUnit(rng), ud(rng));
+      s.curr[perm_b[i]] = test::RandomPlane(rng, ud);
+      s.prev[perm_a[i]] = test::RandomPlane(rng, ud);
     }
   }
   std::shuffle(s.matches.begin(), s.matches.end(), rng);
@@ -67,13 +69,20 @@ TEST(PlaneRegistration, ExactRecoveryFromNoiseFreePlanes) {
     const Pose T = RandomPose(rng, 0.5, 0.5);
     std::vector<detection::Plane> planes;
     const int n = count(rng);
-    // Three planes at least 30 degrees from each other's span make the motion observable.
+    // The first three normals must make the translation observable at the planes' declared
+    // noise: a match's offset residual has sigma up to ~1 cm (5 mm offset noise in each frame,
+    // 1 mrad normal noise at up to 5 m), so sum n n^T needs a smallest eigenvalue of at least 0.2
+    // for a translation sigma of at most ~2.2 cm, under RegistrationConfig's 5 cm limit. (Three
+    // normals merely 30 degrees from each other's span can leave a direction at 5 cm or more,
+    // which the registration rightly flags as degenerate.)
     while (static_cast<int>(planes.size()) < n) {
       const Eigen::Vector3d nrm = RandomUnit(rng);
       bool ok = true;
       if (planes.size() == 1) ok = std::abs(nrm.dot(planes[0].normal)) < 0.8;
       if (planes.size() == 2) {
-        ok = std::abs(nrm.dot(planes[0].normal.cross(planes[1].normal).normalized())) > 0.5;
+        Eigen::Matrix3d info = nrm * nrm.transpose();
+        for (const auto& p : planes) info += p.normal * p.normal.transpose();
+        ok = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(info).eigenvalues()(0) >= 0.2;
       }
       if (ok) planes.push_back(MakePlane(nrm, ud(rng)));
     }
@@ -133,7 +142,7 @@ TEST(PlaneRegistration, CovarianceMatchesTheErrorDistribution) {
                                              MakePlane(room.col(1), ud(rng)),
                                              MakePlane(room.col(2), ud(rng))};
     for (int k = extra_count(rng); k > 0; --k)
-      truth_b.push_back(MakePlane(RandomUnit(rng), ud(rng)));
+      truth_b.push_back(test::RandomPlane(rng, ud));
     std::vector<detection::Plane> prev, curr;
     std::vector<PlaneMatch> matches;
     for (std::size_t i = 0; i < truth_b.size(); ++i) {
