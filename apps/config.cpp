@@ -36,6 +36,16 @@ std::string Quote(const std::string& s) {
 }
 
 /// Applies one YAML mapping to one section, checking every key.
+/// A mapping key as text; YAML also allows sequences and mappings as keys ("? [a]: 1"), which
+/// no config key is.
+std::string PlainKey(const YAML::Node& key, const std::string& where) {
+  if (!key.IsScalar()) {
+    throw ConfigError(where + ":" + std::to_string(key.Mark().line + 1) +
+                      ": a key must be a plain name, not a list or mapping");
+  }
+  return key.Scalar();
+}
+
 class YamlLoader : public FieldVisitor {
  public:
   YamlLoader(const YAML::Node& node, std::string origin, std::string section)
@@ -95,7 +105,7 @@ class YamlLoader : public FieldVisitor {
   /// Keys present in the YAML but never asked for by the section.
   void CheckNoUnknownKeys() const {
     for (const auto& kv : node_) {
-      const std::string key = kv.first.as<std::string>();
+      const std::string key = PlainKey(kv.first, origin_ + ": section '" + section_ + "'");
       if (!seen_.count(key)) Fail(key, "unknown key");
     }
   }
@@ -206,7 +216,7 @@ void Config::LoadString(const std::string& yaml, const std::string& origin) {
   if (root.IsNull()) return;  // an empty file changes nothing
   if (!root.IsMap()) throw ConfigError(origin + ": expected a mapping of sections at the top level");
   for (const auto& kv : root) {
-    const std::string name = kv.first.as<std::string>();
+    const std::string name = PlainKey(kv.first, origin);
     auto it = std::find_if(sections_.begin(), sections_.end(),
                            [&](const auto& s) { return s.first->name == name; });
     if (it == sections_.end()) throw ConfigError(origin + ": key '" + name + "': unknown section");

@@ -70,6 +70,15 @@ TEST(Config, ErrorsNameFileKeyAndReason) {
   EXPECT_NE(LoadError("zz_test_toy: [1, 2\n").find("bad.yaml:"), std::string::npos);
 }
 
+// Found by fuzz_config: YAML allows a mapping or a list as a key ("? ..."), and converting such a
+// key to a name threw yaml-cpp's own exception past the config loader.
+TEST(Config, KeysThatAreListsOrMappingsAreRefused) {
+  EXPECT_EQ(LoadError("output:\n? rkey:\n  d "),
+            "bad.yaml:2: a key must be a plain name, not a list or mapping");
+  EXPECT_EQ(LoadError("zz_test_toy:\n  ? [a, b]\n  : 1\n"),
+            "bad.yaml: section 'zz_test_toy':2: a key must be a plain name, not a list or mapping");
+}
+
 TEST(Config, FailedLoadLeavesValuesUnchanged) {
   Config config;
   EXPECT_THROW(config.LoadString("zz_test_toy:\n  threshold: 2\n  size: 0\n", "x"), ConfigError);
