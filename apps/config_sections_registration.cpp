@@ -34,6 +34,10 @@ void VisitAssociation(FieldVisitor& v, registration::AssociationConfig& c) {
   v.Field("max_search_nodes", c.max_search_nodes, "[-] branch-and-bound node budget", 1, 100000000);
   v.Field("inlier_chi2", c.inlier_chi2,
           "[-] verification gate on a match's whitened residual (3 dof; 16.27 = 99.9%)", 1e-6, 1e9);
+  v.Field("prior_gate_chi2", c.prior_gate_chi2,
+          "[-] a solution this far from the motion prior (6 dof chi^2; 22.46 = 99.9%) loses to one "
+          "that agrees with it; 0 = off",
+          0.0, 1e9);
 }
 
 std::vector<std::string> ValidateAssociation(const registration::AssociationConfig& c) {

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <numeric>
 #include <tuple>
 
@@ -28,6 +29,7 @@ std::vector<std::string> AssociationConfig::Validate() const {
   if (max_tied_cliques < 1) p.push_back("max_tied_cliques must be >= 1");
   if (max_search_nodes < 1) p.push_back("max_search_nodes must be >= 1");
   if (!(inlier_chi2 > 0)) p.push_back("inlier_chi2 must be > 0");
+  if (!(prior_gate_chi2 >= 0)) p.push_back("prior_gate_chi2 must be >= 0");
   return p;
 }
 
@@ -282,40 +284,69 @@ AssociationResult AssociatePlanes(const std::vector<detection::Plane>& prev,
   // 4. Verify each tied clique: solve, keep the candidates whose residual (with the motion's own
   // uncertainty) passes the chi^2 gate, one-to-one, best first; re-solve; score.
   auto to_match = [&](int k) { return PlaneMatch{cands[k].i, cands[k].j, cands[k].flip}; };
-  using Score = std::tuple<int, int, double>;  // (-matches, degenerate dims, log det cov)
-  bool have_best = false;
-  Score best_score;
-  for (const auto& clique : search.cliques()) {
-    std::vector<PlaneMatch> matches;
-    for (int k : clique) matches.push_back(to_match(k));
-    RegistrationResult reg = RegisterPlanes(prev, curr, matches, prior, rc);
-    const Eigen::Matrix3d R = reg.T_prev_curr.linear();
-    const Eigen::Vector3d t = reg.T_prev_curr.translation();
+  // Whitened residual (chi^2, 3 dof) of candidate k under motion (R, t) of covariance `cov`.
+  auto candidate_chi2 = [&](int k, const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                            const Matrix6d& cov) {
+    internal::MatchData md;
+    if (!internal::MakeMatchData(prev, curr, to_match(k), rc, &md)) {
+      return std::numeric_limits<double>::infinity();
+    }
+    const internal::Linearized lin = internal::Linearize(md, R, t, rc);
+    const Eigen::Matrix3d s = lin.cov + lin.J * cov * lin.J.transpose();
+    const double c2 = lin.r.dot(s.ldlt().solve(lin.r));
+    return std::isfinite(c2) ? c2 : std::numeric_limits<double>::infinity();
+  };
+  // Candidates consistent with motion (R, t) of covariance `cov`, one-to-one, best first.
+  auto consistent_with = [&](const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                             const Matrix6d& cov) {
     std::vector<std::pair<double, int>> chi2;
     for (int k = 0; k < n; ++k) {
-      internal::MatchData md;
-      if (!internal::MakeMatchData(prev, curr, to_match(k), rc, &md)) continue;
-      const internal::Linearized lin = internal::Linearize(md, R, t, rc);
-      const Eigen::Matrix3d s = lin.cov + lin.J * reg.covariance * lin.J.transpose();
-      const double c2 = lin.r.dot(s.ldlt().solve(lin.r));
-      if (std::isfinite(c2) && c2 <= config.inlier_chi2) chi2.emplace_back(c2, k);
+      const double c2 = candidate_chi2(k, R, t, cov);
+      if (c2 <= config.inlier_chi2) chi2.emplace_back(c2, k);
     }
     std::stable_sort(chi2.begin(), chi2.end());
     std::vector<char> used_a(prev.size(), 0), used_b(curr.size(), 0);
-    std::vector<PlaneMatch> verified;
+    std::vector<int> verified;
     for (const auto& [c2, k] : chi2) {
       if (used_a[cands[k].i] || used_b[cands[k].j]) continue;
       used_a[cands[k].i] = used_b[cands[k].j] = 1;
-      verified.push_back(to_match(k));
+      verified.push_back(k);
     }
-    std::sort(verified.begin(), verified.end(), [](const PlaneMatch& x, const PlaneMatch& y) {
+    return verified;
+  };
+  auto as_matches = [&](const std::vector<int>& ks) {
+    std::vector<PlaneMatch> matches;
+    for (int k : ks) matches.push_back(to_match(k));
+    std::sort(matches.begin(), matches.end(), [](const PlaneMatch& x, const PlaneMatch& y) {
       return std::tie(x.prev, x.curr) < std::tie(y.prev, y.curr);
     });
+    return matches;
+  };
+  // Innovation of a solution against the prior (chi^2 with 6 dof).
+  const Matrix6d prior_cov = 0.5 * (prior.covariance + prior.covariance.transpose());
+  auto prior_chi2 = [&](const RegistrationResult& reg) {
+    const Vector6d delta = BoxMinus(reg.T_prev_curr, prior.T_prev_curr);
+    const Matrix6d s = prior_cov + reg.covariance;
+    const double c2 = delta.dot(s.ldlt().solve(delta));
+    return std::isfinite(c2) ? c2 : std::numeric_limits<double>::infinity();
+  };
+  // Score, lowest best: consistency with the prior first (a wrong clique of mismatched planes
+  // can outnumber the true matches, e.g. the facets of a cylinder that slide as the sensor
+  // moves, and then jumps by decimetres against a prior of centimetres), then more matches, fewer
+  // degenerate directions, a smaller covariance.
+  using Score = std::tuple<int, int, int, double>;
+  bool have_best = false;
+  Score best_score;
+  auto consider = [&](const std::vector<PlaneMatch>& matches) {
+    RegistrationResult reg = RegisterPlanes(prev, curr, matches, prior, rc);
+    const std::vector<PlaneMatch> verified = as_matches(
+        consistent_with(reg.T_prev_curr.linear(), reg.T_prev_curr.translation(), reg.covariance));
     if (!(verified.size() == matches.size() &&
           std::is_permutation(verified.begin(), verified.end(), matches.begin()))) {
       reg = RegisterPlanes(prev, curr, verified, prior, rc);
     }
-    const Score score{-static_cast<int>(verified.size()),
+    const bool off_prior = config.prior_gate_chi2 > 0 && prior_chi2(reg) > config.prior_gate_chi2;
+    const Score score{off_prior ? 1 : 0, -static_cast<int>(verified.size()),
                       static_cast<int>(reg.degenerate_directions.size()), LogDet(reg.covariance)};
     if (!have_best || score < best_score) {
       have_best = true;
@@ -323,6 +354,30 @@ AssociationResult AssociatePlanes(const std::vector<detection::Plane>& prev,
       out.matches = verified;
       out.registration = reg;
     }
+  };
+  for (const auto& clique : search.cliques()) {
+    std::vector<PlaneMatch> matches;
+    for (int k : clique) matches.push_back(to_match(k));
+    consider(matches);
+  }
+  // No maximum clique agrees with the prior: grow a set from the matches the prior predicts,
+  // best first, keeping a match only when the solution with it still explains every kept match.
+  if (have_best && std::get<0>(best_score) == 1) {
+    std::vector<int> kept;
+    for (int k : consistent_with(prior.T_prev_curr.linear(), prior.T_prev_curr.translation(),
+                                 prior_cov)) {
+      std::vector<int> trial = kept;
+      trial.push_back(k);
+      const RegistrationResult reg = RegisterPlanes(prev, curr, as_matches(trial), prior, rc);
+      const Eigen::Matrix3d R = reg.T_prev_curr.linear();
+      const Eigen::Vector3d t = reg.T_prev_curr.translation();
+      const bool explained = std::all_of(trial.begin(), trial.end(), [&](int j) {
+        return candidate_chi2(j, R, t, reg.covariance) <= config.inlier_chi2;
+      });
+      if (explained) kept = std::move(trial);
+    }
+    if (!kept.empty()) consider(as_matches(kept));
+    out.prior_inconsistent = std::get<0>(best_score) == 1;
   }
   if (!have_best) out.registration = RegisterPlanes(prev, curr, {}, prior, rc);
   return out;

@@ -41,6 +41,9 @@ struct AssociationConfig {
   int max_search_nodes = 20000;      ///< branch-and-bound budget [-]
   /// Verification gate on a match's whitened residual (3 dof; 99.9% of chi^2(3) = 16.27) [-].
   double inlier_chi2 = 16.27;
+  /// A solution whose motion differs from the prior by more than this chi^2 (6 dof, with both
+  /// covariances; 99.9% of chi^2(6) = 22.46) loses to any that agrees with it; 0 = no check [-].
+  double prior_gate_chi2 = 22.46;
 
   std::vector<std::string> Validate() const;
 };
@@ -51,6 +54,7 @@ struct AssociationResult {
   int clique_size = 0;              ///< size of the maximum consistent set
   int tied_cliques = 0;             ///< maximum cliques found with that size (up to the limit)
   bool search_exhausted = false;    ///< node budget hit: the clique may not be maximum
+  bool prior_inconsistent = false;  ///< even the best solution disagrees with the prior
   /// Registration of the chosen matches (what the tie-break computed); callers may re-run it.
   RegistrationResult registration;
 };
