@@ -46,53 +46,63 @@ void MergeCoplanarRegions(std::vector<std::int32_t>& labels, int width, int heig
       if (below && below[x] >= 0 && below[x] != a) record(a, below[x]);
     }
   }
+  std::sort(pairs.begin(), pairs.end());
+  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
   const double cos_merge = std::cos(params.merge_angle_deg * M_PI / 180.0);
   std::vector<FastFit> fits(n);
   for (int i = 0; i < n; ++i) fits[i] = FitSums(regions[i]);
+  // One plane: normals within the merge angle and the union's MSE within epsilon of its noise.
+  // Regions that do not touch must also each lie on the union's plane: their mean offset from it
+  // within gamma. (The MSE test alone lets two parallel surfaces a few centimetres apart merge at
+  // 4 m, where the per-point noise is 2 cm; touching regions are held together by their border.)
+  auto one_plane = [&](const MomentSums& ra, const MomentSums& rb, bool touching, double* mse) {
+    if (std::abs(FitSums(ra).normal.dot(FitSums(rb).normal)) < cos_merge) return false;
+    MomentSums u = ra;
+    u.Merge(rb);
+    const FastFit fu = FitSums(u);
+    if (fu.mse >= params.Epsilon(u.ExpectedMse(fu.normal))) return false;
+    if (!touching) {
+      if (std::abs(fu.normal.dot(ra.Centroid()) - fu.d) > params.gamma) return false;
+      if (std::abs(fu.normal.dot(rb.Centroid()) - fu.d) > params.gamma) return false;
+    }
+    *mse = fu.mse;
+    return true;
+  };
+  // Candidate pairs ordered by the MSE of their union (the most obviously one surface first).
+  std::vector<std::tuple<double, int, int, bool>> cand;
+  auto consider = [&](int a, int b, bool touching) {
+    if (regions[a].k < 3 || regions[b].k < 3) return;
+    if (std::abs(fits[a].normal.dot(fits[b].normal)) < cos_merge) return;
+    double mse = 0.0;
+    if (one_plane(regions[a], regions[b], touching, &mse)) cand.emplace_back(mse, a, b, touching);
+  };
+  for (std::uint64_t key : pairs) {
+    consider(static_cast<int>(key >> 32), static_cast<int>(key & 0xffffffffu), true);
+  }
   if (params.merge_disjoint) {
     // Regions that do not touch can still be one plane: a floor or wall seen on both sides of an
-    // occluder. Every pair of near-parallel regions is a candidate; the union-MSE test decides.
+    // occluder.
     for (int a = 0; a < n; ++a) {
-      if (regions[a].k < 3) continue;
       for (int b = a + 1; b < n; ++b) {
-        if (regions[b].k < 3 || std::abs(fits[a].normal.dot(fits[b].normal)) < cos_merge) continue;
-        pairs.push_back(static_cast<std::uint64_t>(a) << 32 | static_cast<std::uint64_t>(b));
+        const std::uint64_t key = static_cast<std::uint64_t>(a) << 32 | static_cast<std::uint64_t>(b);
+        if (!std::binary_search(pairs.begin(), pairs.end(), key)) consider(a, b, false);
       }
     }
-  }
-  if (pairs.empty()) return;
-  std::sort(pairs.begin(), pairs.end());
-  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
-
-  // Candidate pairs ordered by the MSE of their union (the most obviously one surface first).
-  std::vector<std::tuple<double, int, int>> cand;
-  for (std::uint64_t key : pairs) {
-    const int a = static_cast<int>(key >> 32), b = static_cast<int>(key & 0xffffffffu);
-    if (regions[a].k < 3 || regions[b].k < 3) continue;
-    if (std::abs(fits[a].normal.dot(fits[b].normal)) < cos_merge) continue;
-    MomentSums u = regions[a];
-    u.Merge(regions[b]);
-    const FastFit fu = FitSums(u);
-    if (fu.mse < params.Epsilon(u.ExpectedMse(fu.normal))) cand.emplace_back(fu.mse, a, b);
   }
   if (cand.empty()) return;
   std::sort(cand.begin(), cand.end());
   std::vector<int> parent(n);
   std::iota(parent.begin(), parent.end(), 0);
   bool merged_any = false;
-  for (const auto& [mse0, a0, b0] : cand) {
+  for (const auto& [mse0, a0, b0, touching] : cand) {
     (void)mse0;
     int a = Find(parent, a0), b = Find(parent, b0);
     if (a == b) continue;
     if (b < a) std::swap(a, b);
     // Re-test with the current (possibly already merged) regions.
-    const FastFit fa = FitSums(regions[a]), fb = FitSums(regions[b]);
-    if (std::abs(fa.normal.dot(fb.normal)) < cos_merge) continue;
-    MomentSums u = regions[a];
-    u.Merge(regions[b]);
-    const FastFit fu = FitSums(u);
-    if (fu.mse >= params.Epsilon(u.ExpectedMse(fu.normal))) continue;
-    regions[a] = u;
+    double mse = 0.0;
+    if (!one_plane(regions[a], regions[b], touching, &mse)) continue;
+    regions[a].Merge(regions[b]);
     regions[b] = MomentSums();
     parent[b] = a;
     merged_any = true;
