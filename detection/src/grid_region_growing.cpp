@@ -106,49 +106,22 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     for (int cx = 0; cx < cells_x; ++cx) {
       const int x0 = cx * k, x1 = std::min(width, x0 + k);
       // K, S, Q (10 sums); the noise moment W of the grid is set from its centre below.
-      double k_ = 0, sx = 0, sy = 0, sz = 0, xx = 0, xy = 0, xz = 0, yy = 0, yz = 0, zz = 0;
+      MomentSums m;
       for (int y = y0; y < y1; ++y) {
         const Eigen::Vector3f* row = pts + static_cast<std::size_t>(y) * width;
         for (int x = x0; x < x1; ++x) {
           const Eigen::Vector3f& p = row[x];
-          if (!std::isfinite(p.z())) continue;
-          const double px = p.x(), py = p.y(), pz = p.z();
-          k_ += 1.0;
-          sx += px;
-          sy += py;
-          sz += pz;
-          xx += px * px;
-          xy += px * py;
-          xz += px * pz;
-          yy += py * py;
-          yz += py * pz;
-          zz += pz * pz;
+          if (std::isfinite(p.z())) m.AddPosition(p.x(), p.y(), p.z());
         }
       }
-      MomentSums& m = crow[cx];
-      m = MomentSums();
-      if (k_ <= 0) continue;
-      m.k = k_;
-      m.sx = sx;
-      m.sy = sy;
-      m.sz = sz;
-      m.xx = xx;
-      m.xy = xy;
-      m.xz = xz;
-      m.yy = yy;
-      m.yz = yz;
-      m.zz = zz;
-      // Noise moment: W = w(z) Q with w = (sigma(z)/z)^2 at the grid's centre (within a k x k
-      // grid z varies by ~1 %, so this equals the per-pixel sum to ~2 %; the refinement and the
-      // final planes use per-pixel weights).
-      const double z = spherical ? m.Centroid().norm() : sz / k_;
-      const double w = z > 0 ? (s0 + s2 * z * z) * (s0 + s2 * z * z) / (z * z) : 0.0;
-      m.wxx = w * xx;
-      m.wxy = w * xy;
-      m.wxz = w * xz;
-      m.wyy = w * yy;
-      m.wyz = w * yz;
-      m.wzz = w * zz;
+      if (m.k > 0) {
+        // Noise moment: W = w(z) Q with w = (sigma(z)/z)^2 at the grid's centre (within a k x k
+        // grid z varies by ~1 %, so this equals the per-pixel sum to ~2 %; the refinement and
+        // the final planes use per-pixel weights).
+        const double z = spherical ? m.Centroid().norm() : m.sz / m.k;
+        m.SetUniformNoise(z > 0 ? (s0 + s2 * z * z) * (s0 + s2 * z * z) / (z * z) : 0.0);
+      }
+      crow[cx] = m;
     }
   }
 

@@ -32,25 +32,37 @@ struct MomentSums {
   double wxx = 0, wxy = 0, wxz = 0;  ///< W = sum w_i p_i p_i^T [m^2] (noise moment)
   double wyy = 0, wyz = 0, wzz = 0;
 
-  /// Adds point (x, y, z) whose relative ray noise is w = (sigma / depth)^2 [1].
-  void Add(double x, double y, double z, double w) {
+  /// Adds point (x, y, z) to K, S and Q only (W is then set by the caller, e.g. per grid).
+  void AddPosition(double x, double y, double z) {
     k += 1.0;
     sx += x;
     sy += y;
     sz += z;
-    const double xx_ = x * x, xy_ = x * y, xz_ = x * z, yy_ = y * y, yz_ = y * z, zz_ = z * z;
-    xx += xx_;
-    xy += xy_;
-    xz += xz_;
-    yy += yy_;
-    yz += yz_;
-    zz += zz_;
-    wxx += w * xx_;
-    wxy += w * xy_;
-    wxz += w * xz_;
-    wyy += w * yy_;
-    wyz += w * yz_;
-    wzz += w * zz_;
+    xx += x * x;
+    xy += x * y;
+    xz += x * z;
+    yy += y * y;
+    yz += y * z;
+    zz += z * z;
+  }
+  /// Adds point (x, y, z) whose relative ray noise is w = (sigma / depth)^2 [1].
+  void Add(double x, double y, double z, double w) {
+    AddPosition(x, y, z);
+    wxx += w * (x * x);
+    wxy += w * (x * y);
+    wxz += w * (x * z);
+    wyy += w * (y * y);
+    wyz += w * (y * z);
+    wzz += w * (z * z);
+  }
+  /// Sets W = w Q: the noise moment when every point has the same relative noise w.
+  void SetUniformNoise(double w) {
+    wxx = w * xx;
+    wxy = w * xy;
+    wxz = w * xz;
+    wyy = w * yy;
+    wyz = w * yz;
+    wzz = w * zz;
   }
   void Merge(const MomentSums& o) {
     k += o.k;
