@@ -29,7 +29,6 @@ namespace ds = planeslam::datasets;
 using bench::BenchFrame;
 using bench::Method;
 
-/// Timing of one method on one frame.
 using StageTimes = std::vector<std::pair<std::string, std::vector<double>>>;
 
 /// The samples of `stage` in `stages`, appended (keeping first-seen order) when new.
@@ -40,6 +39,7 @@ std::vector<double>& StageSamples(StageTimes& stages, const std::string& stage) 
   return stages.emplace_back(stage, std::vector<double>()).second;
 }
 
+/// Timing of one method on one frame.
 struct DetectRecord {
   std::string method;
   std::string frame;

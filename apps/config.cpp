@@ -35,7 +35,6 @@ std::string Quote(const std::string& s) {
   return out + "\"";
 }
 
-/// Applies one YAML mapping to one section, checking every key.
 /// A mapping key as text; YAML also allows sequences and mappings as keys ("? [a]: 1"), which
 /// no config key is.
 std::string PlainKey(const YAML::Node& key, const std::string& where) {
@@ -46,6 +45,7 @@ std::string PlainKey(const YAML::Node& key, const std::string& where) {
   return key.Scalar();
 }
 
+/// Applies one YAML mapping to one section, checking every key.
 class YamlLoader : public FieldVisitor {
  public:
   YamlLoader(const YAML::Node& node, std::string origin, std::string section)

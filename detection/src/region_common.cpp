@@ -55,8 +55,9 @@ void MergeCoplanarRegions(std::vector<std::int32_t>& labels, int width, int heig
   // Regions that do not touch must also each lie on the union's plane: their mean offset from it
   // within gamma. (The MSE test alone lets two parallel surfaces a few centimetres apart merge at
   // 4 m, where the per-point noise is 2 cm; touching regions are held together by their border.)
-  auto one_plane = [&](const MomentSums& ra, const MomentSums& rb, bool touching, double* mse) {
-    if (std::abs(FitSums(ra).normal.dot(FitSums(rb).normal)) < cos_merge) return false;
+  auto one_plane = [&](const MomentSums& ra, const FastFit& fa, const MomentSums& rb,
+                       const FastFit& fb, bool touching, double* mse) {
+    if (std::abs(fa.normal.dot(fb.normal)) < cos_merge) return false;
     MomentSums u = ra;
     u.Merge(rb);
     const FastFit fu = FitSums(u);
@@ -72,9 +73,10 @@ void MergeCoplanarRegions(std::vector<std::int32_t>& labels, int width, int heig
   std::vector<std::tuple<double, int, int, bool>> cand;
   auto consider = [&](int a, int b, bool touching) {
     if (regions[a].k < 3 || regions[b].k < 3) return;
-    if (std::abs(fits[a].normal.dot(fits[b].normal)) < cos_merge) return;
     double mse = 0.0;
-    if (one_plane(regions[a], regions[b], touching, &mse)) cand.emplace_back(mse, a, b, touching);
+    if (one_plane(regions[a], fits[a], regions[b], fits[b], touching, &mse)) {
+      cand.emplace_back(mse, a, b, touching);
+    }
   };
   for (std::uint64_t key : pairs) {
     consider(static_cast<int>(key >> 32), static_cast<int>(key & 0xffffffffu), true);
@@ -101,7 +103,10 @@ void MergeCoplanarRegions(std::vector<std::int32_t>& labels, int width, int heig
     if (b < a) std::swap(a, b);
     // Re-test with the current (possibly already merged) regions.
     double mse = 0.0;
-    if (!one_plane(regions[a], regions[b], touching, &mse)) continue;
+    if (!one_plane(regions[a], FitSums(regions[a]), regions[b], FitSums(regions[b]), touching,
+                   &mse)) {
+      continue;
+    }
     regions[a].Merge(regions[b]);
     regions[b] = MomentSums();
     parent[b] = a;

@@ -131,9 +131,7 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
   if (result.used_point_to_plane) ++stats_.point_to_plane_frames;
   if (reg.converged && config_.prior_gate_chi2 > 0) {
     // Innovation of the result against the constant-velocity prediction.
-    const Vector6d delta = registration::BoxMinus(reg.T_prev_curr, prior.T_prev_curr);
-    const Matrix6d s = prior.covariance + reg.covariance;
-    const double chi2 = delta.dot(s.ldlt().solve(delta));
+    const double chi2 = registration::PriorInnovationChi2(reg, prior);
     if (!(chi2 <= config_.prior_gate_chi2) &&
         consecutive_refusals_ < config_.prior_gate_max_refusals) {
       result.refused = true;

@@ -322,14 +322,6 @@ AssociationResult AssociatePlanes(const std::vector<detection::Plane>& prev,
     });
     return matches;
   };
-  // Innovation of a solution against the prior (chi^2 with 6 dof).
-  const Matrix6d prior_cov = 0.5 * (prior.covariance + prior.covariance.transpose());
-  auto prior_chi2 = [&](const RegistrationResult& reg) {
-    const Vector6d delta = BoxMinus(reg.T_prev_curr, prior.T_prev_curr);
-    const Matrix6d s = prior_cov + reg.covariance;
-    const double c2 = delta.dot(s.ldlt().solve(delta));
-    return std::isfinite(c2) ? c2 : std::numeric_limits<double>::infinity();
-  };
   // Score, lowest best: consistency with the prior first (a wrong clique of mismatched planes
   // can outnumber the true matches, e.g. the facets of a cylinder that slide as the sensor
   // moves, and then jumps by decimetres against a prior of centimetres), then more matches, fewer
@@ -345,7 +337,8 @@ AssociationResult AssociatePlanes(const std::vector<detection::Plane>& prev,
           std::is_permutation(verified.begin(), verified.end(), matches.begin()))) {
       reg = RegisterPlanes(prev, curr, verified, prior, rc);
     }
-    const bool off_prior = config.prior_gate_chi2 > 0 && prior_chi2(reg) > config.prior_gate_chi2;
+    const bool off_prior =
+        config.prior_gate_chi2 > 0 && PriorInnovationChi2(reg, prior) > config.prior_gate_chi2;
     const Score score{off_prior ? 1 : 0, -static_cast<int>(verified.size()),
                       static_cast<int>(reg.degenerate_directions.size()), LogDet(reg.covariance)};
     if (!have_best || score < best_score) {
@@ -365,7 +358,7 @@ AssociationResult AssociatePlanes(const std::vector<detection::Plane>& prev,
   if (have_best && std::get<0>(best_score) == 1) {
     std::vector<int> kept;
     for (int k : consistent_with(prior.T_prev_curr.linear(), prior.T_prev_curr.translation(),
-                                 prior_cov)) {
+                                 prior.covariance)) {
       std::vector<int> trial = kept;
       trial.push_back(k);
       const RegistrationResult reg = RegisterPlanes(prev, curr, as_matches(trial), prior, rc);

@@ -4,6 +4,7 @@
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "plane_residual.hpp"
 #include "planeslam/datasets/errors.hpp"
@@ -380,6 +381,13 @@ RegistrationResult RegisterPlanes(const std::vector<detection::Plane>& prev,
     return fallback;
   }
   return res;
+}
+
+double PriorInnovationChi2(const RegistrationResult& result, const MotionPrior& prior) {
+  const Vector6d delta = BoxMinus(result.T_prev_curr, prior.T_prev_curr);
+  const Matrix6d s = prior.covariance + result.covariance;
+  const double chi2 = delta.dot(s.ldlt().solve(delta));
+  return std::isfinite(chi2) ? chi2 : std::numeric_limits<double>::infinity();
 }
 
 std::vector<double> PlaneMatchChi2(const std::vector<detection::Plane>& prev,

@@ -104,6 +104,11 @@ RegistrationResult RegisterPlanes(const std::vector<detection::Plane>& prev,
                                   const std::vector<PlaneMatch>& matches, const MotionPrior& prior,
                                   const RegistrationConfig& config = {});
 
+/// Innovation of a registration against its prior: chi^2 (6 dof) of BoxMinus(result, prior) with
+/// covariance prior + result; infinity when not finite. Used to prefer (association) or refuse
+/// (SLAM tracking) a motion that disagrees with the constant-velocity prediction.
+double PriorInnovationChi2(const RegistrationResult& result, const MotionPrior& prior);
+
 /// Per-match whitened squared residual (3 dof) of `matches` under the motion T_prev_curr (used by
 /// association to verify candidates).
 std::vector<double> PlaneMatchChi2(const std::vector<detection::Plane>& prev,
