@@ -41,8 +41,10 @@ void VisitDetection(FieldVisitor& v, DetectionSection& c) {
           100.0);
   v.Field("refine_boundary", p.refine_boundary,
           "GBRG: re-assign the pixels of border grids to the best-fitting adjacent plane");
-  v.Field("refine_sigmas", p.refine_sigmas,
-          "refinement: a pixel joins when |n.p - d| < gamma + this many sigma_n [1]", 0.0, 100.0);
+  v.Field(
+      "refine_sigmas", p.refine_sigmas,
+      "refinement: a pixel joins when |n.p - d| < this many sigma_n (constant model: gamma) [1]",
+      0.0, 100.0);
   v.Field("merge_regions", p.merge_regions, "merge adjacent regions that describe one surface");
   v.Field("merge_angle_deg", p.merge_angle_deg, "merging: max angle between normals [deg]", 0.0,
           89.99);

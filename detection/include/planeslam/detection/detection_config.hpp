@@ -49,7 +49,8 @@ struct DetectionParams {
   double planar_sigmas =
       1.5;  ///< depth model: grids with rms residual below this many sigma are planar
   bool refine_boundary = true;   ///< give edge pixels of non-planar grids to an adjacent plane
-  double refine_sigmas = 3.0;    ///< refinement: max |n.p - d| = gamma(z) with this many sigma
+  double refine_sigmas = 3.0;    ///< depth model refinement: max |n.p - d| = this many sigma_n
+                                 ///< (constant model: gamma)
   bool merge_regions = true;     ///< merge adjacent regions that describe one surface
   double merge_angle_deg = 5.0;  ///< merge: max angle between the two normals [deg]
   /// Merge also regions that do not touch (a surface seen on both sides of an occluder). Off by
