@@ -7,10 +7,13 @@
 /// 2. Two candidates are consistent when a rigid motion could explain both: the angle between
 ///    the two normals is the same in both frames, and for (anti)parallel pairs the offset
 ///    difference (sum) is the same up to what the prior translation can change.
-/// 3. The largest set of mutually consistent candidates (a maximum clique, branch and bound with
-///    a colouring bound, node budget) is chosen; ties are broken by verifying each tied clique
-///    (solve, drop matches with a large residual, add gated candidates that fit) and keeping the
-///    one with the most matches, then the fewest degenerate directions, then the smallest pose
+/// 3. The largest sets of mutually consistent candidates (maximum cliques, branch and bound with
+///    a colouring bound, node budget), and the set grown from the matches the motion prior
+///    predicts, are verified (solve, drop matches with a large residual, add gated candidates
+///    that fit); the one kept agrees with the prior if any does, then has the most support (each
+///    match weighs as its smaller plane's pixel count: consensus counted in evidence rather than
+///    in planes, so a few small facets of a curved surface that agree on a wrong motion do not
+///    outvote two walls), then the fewest degenerate directions, then the smallest pose
 ///    uncertainty (log det of the covariance).
 #include <vector>
 
