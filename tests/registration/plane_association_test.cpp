@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdint>
 #include <numeric>
 #include <random>
 #include <set>
@@ -163,49 +164,84 @@ TEST(PlaneAssociation, PlaneThroughTheOriginMatchesWithFlippedOrientation) {
   EXPECT_LT(test::TranslationError(a.registration.T_prev_curr, T), 1e-9);
 }
 
-TEST(PlaneAssociation, PriorOutweighsALargerSetOfPlanesThatMovedTogether) {
-  // Three static planes moved by the sensor's motion T, and four planes that moved together by
-  // another motion (an object carried through the view; in the simulator, the facets of a
-  // cylinder that slide as the sensor moves): the larger consistent set is wrong, and 25 cm and
-  // 11 deg from a constant-velocity prior at T with 5 cm / 0.05 rad sigma.
-  const std::vector<detection::Plane> still = {
-      MakePlane(Eigen::Vector3d(1.0, 0.0, 0.2), 2.0), MakePlane(Eigen::Vector3d(0.0, 1.0, 0.1), 2.5),
-      MakePlane(Eigen::Vector3d(0.1, 0.2, 1.0), 3.0)};
-  const std::vector<detection::Plane> carried = {
-      MakePlane(Eigen::Vector3d(1.0, 1.0, 0.0), 0.8), MakePlane(Eigen::Vector3d(-1.0, 1.0, 0.3), 1.0),
-      MakePlane(Eigen::Vector3d(0.3, -1.0, 1.0), 1.1), MakePlane(Eigen::Vector3d(1.0, 0.2, -1.0), 0.9)};
-  Pose T = Pose::Identity();
-  T.linear() = ExpSO3(Eigen::Vector3d(0.0, 0.02, 0.0));
-  T.translation() << 0.02, 0.0, 0.01;
-  Pose T_carried = T;
-  T_carried.linear() = ExpSO3(Eigen::Vector3d(0.0, 0.2, 0.0)) * T.linear();
-  T_carried.translation() += Eigen::Vector3d(0.25, 0.0, 0.0);
+/// Three static planes moved by the sensor's motion T, and four planes that moved together by
+/// another motion (an object carried through the view; in the simulator, the facets of a
+/// cylinder that slide as the sensor moves), `carried_shift` along x and `carried_turn` about y
+/// away from T. Static planes come first in both frames (indices 0-2), so the true matches are
+/// (0,0), (1,1), (2,2); the second static plane (normal near y) fits either motion.
+struct MovingObjectScene {
   std::vector<detection::Plane> prev, curr;
-  for (const auto& p : still) {
-    curr.push_back(p);
-    prev.push_back(MovePlane(p, T));
+  Pose T = Pose::Identity();
+};
+
+MovingObjectScene MakeMovingObjectScene(std::int64_t still_pixels, std::int64_t carried_pixels,
+                                        double carried_shift, double carried_turn) {
+  const std::vector<detection::Plane> still = {MakePlane(Eigen::Vector3d(1.0, 0.0, 0.2), 2.0),
+                                               MakePlane(Eigen::Vector3d(0.0, 1.0, 0.1), 2.5),
+                                               MakePlane(Eigen::Vector3d(0.1, 0.2, 1.0), 3.0)};
+  const std::vector<detection::Plane> carried = {MakePlane(Eigen::Vector3d(1.0, 1.0, 0.0), 0.8),
+                                                 MakePlane(Eigen::Vector3d(-1.0, 1.0, 0.3), 1.0),
+                                                 MakePlane(Eigen::Vector3d(0.3, -1.0, 1.0), 1.1),
+                                                 MakePlane(Eigen::Vector3d(1.0, 0.2, -1.0), 0.9)};
+  MovingObjectScene scene;
+  scene.T.linear() = ExpSO3(Eigen::Vector3d(0.0, 0.02, 0.0));
+  scene.T.translation() << 0.02, 0.0, 0.01;
+  Pose T_carried = scene.T;
+  T_carried.linear() = ExpSO3(Eigen::Vector3d(0.0, carried_turn, 0.0)) * scene.T.linear();
+  T_carried.translation() += Eigen::Vector3d(carried_shift, 0.0, 0.0);
+  for (detection::Plane p : still) {
+    p.point_count = still_pixels;
+    scene.curr.push_back(p);
+    scene.prev.push_back(MovePlane(p, scene.T));
   }
-  for (const auto& p : carried) {
-    curr.push_back(p);
-    prev.push_back(MovePlane(p, T_carried));
+  for (detection::Plane p : carried) {
+    p.point_count = carried_pixels;
+    scene.curr.push_back(p);
+    scene.prev.push_back(MovePlane(p, T_carried));
   }
+  return scene;
+}
+
+const std::set<std::pair<int, int>> kStillMatches = {{0, 0}, {1, 1}, {2, 2}};
+
+/// A constant-velocity prior at T with `sigma` [m and rad] on every axis.
+MotionPrior PriorAt(const Pose& T, double sigma) {
   MotionPrior prior;
   prior.T_prev_curr = T;
-  prior.covariance = Matrix6d::Zero();
-  prior.covariance.diagonal() << 0.05 * 0.05, 0.05 * 0.05, 0.05 * 0.05, 0.05 * 0.05,
-      0.05 * 0.05, 0.05 * 0.05;
-  const std::set<std::pair<int, int>> still_matches = {{0, 0}, {1, 1}, {2, 2}};
-  const AssociationResult a = AssociatePlanes(prev, curr, prior);
-  EXPECT_EQ(AsSet(a.matches), still_matches);
+  prior.covariance = Vector6d::Constant(sigma * sigma).asDiagonal();
+  return prior;
+}
+
+TEST(PlaneAssociation, PriorOutweighsALargerSetOfPlanesThatMovedTogether) {
+  // All planes equally large: the larger consistent set is wrong, and 25 cm and 11 deg from a
+  // constant-velocity prior at T with 5 cm / 0.05 rad sigma.
+  const MovingObjectScene scene = MakeMovingObjectScene(1000, 1000, 0.25, 0.2);
+  const MotionPrior prior = PriorAt(scene.T, 0.05);
+  const AssociationResult a = AssociatePlanes(scene.prev, scene.curr, prior);
+  EXPECT_EQ(AsSet(a.matches), kStillMatches);
   EXPECT_FALSE(a.prior_inconsistent);
-  EXPECT_LT(test::RotationError(a.registration.T_prev_curr, T), 1e-9);
-  EXPECT_LT(test::TranslationError(a.registration.T_prev_curr, T), 1e-9);
+  EXPECT_LT(test::RotationError(a.registration.T_prev_curr, scene.T), 1e-9);
+  EXPECT_LT(test::TranslationError(a.registration.T_prev_curr, scene.T), 1e-9);
   // Without the check the larger set wins: the case the check is for.
   AssociationConfig no_gate;
   no_gate.prior_gate_chi2 = 0.0;
-  const AssociationResult b = AssociatePlanes(prev, curr, prior, no_gate);
+  const AssociationResult b = AssociatePlanes(scene.prev, scene.curr, prior, no_gate);
   EXPECT_GE(b.matches.size(), 4u);
-  EXPECT_GT(test::TranslationError(b.registration.T_prev_curr, T), 0.2);
+  EXPECT_GT(test::TranslationError(b.registration.T_prev_curr, scene.T), 0.2);
+}
+
+TEST(PlaneAssociation, SupportOutweighsMoreSmallPlanesThatMovedTogether) {
+  // Three walls of 100 000 px against four 2000-px facets that agree on another motion 10 cm and
+  // 3.4 deg away, inside the 5 cm / 0.05 rad prior's gate, so the prior alone cannot tell the two
+  // sets apart. The largest pairwise-consistent set mixes both (3.4 deg is within the pairwise
+  // angle tolerance); the walls, grown from the prior's prediction and counted in pixels, must
+  // win. (Counted in planes, as before, the answer was the one wall both motions explain.)
+  const MovingObjectScene scene = MakeMovingObjectScene(100000, 2000, 0.10, 0.06);
+  const MotionPrior prior = PriorAt(scene.T, 0.05);
+  const AssociationResult a = AssociatePlanes(scene.prev, scene.curr, prior);
+  EXPECT_EQ(AsSet(a.matches), kStillMatches);
+  EXPECT_LT(test::RotationError(a.registration.T_prev_curr, scene.T), 1e-9);
+  EXPECT_LT(test::TranslationError(a.registration.T_prev_curr, scene.T), 1e-9);
 }
 
 TEST(PlaneAssociation, DegenerateInputsNeverFail) {
