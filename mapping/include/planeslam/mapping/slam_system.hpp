@@ -39,9 +39,11 @@ struct SlamConfig {
   /// degrades (synthetic room, 565 frames: ATE 15.8 -> 5.8 cm).
   int keyframe_min_matches = 4;
   /// Prior covariance of the constant-velocity prediction, per frame: 1 sigma [m] and [rad].
-  /// 0.05 m / 0.05 rad: TUM fr3 structure_notexture_far (handheld, 30 Hz) needs it (ATE 1.87 cm;
-  /// 0.03 gives 7.9 cm and 0.015 gives 15 cm, the gate below then refuses good frames). The
-  /// synthetic room prefers 0.015 (ATE 5.8 cm against 12.3 cm at 0.05): its motion is smooth.
+  /// 0.05 m / 0.05 rad, although the real change of velocity is smaller (TUM fr3 ground truth:
+  /// 4 mm per frame at the 99th percentile): tighter, the association's prior preference and the
+  /// gate below refuse the small planes that fix directions the large ones leave open (measured
+  /// 2026-11-30 without disjoint merging: TUM fr3 ATE 2.81 cm at 0.05, 11.8 cm at 0.03 and 0.02;
+  /// synthetic room 6.6 / 6.8 / 7.2 cm).
   double prior_translation_sigma = 0.05;
   double prior_rotation_sigma = 0.05;
   /// A tracking result whose correction to the prior has a chi-square (6 dof, prior + result
