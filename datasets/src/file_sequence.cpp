@@ -8,6 +8,8 @@
 
 #include "planeslam/datasets/errors.hpp"
 #include "planeslam/datasets/pcd_io.hpp"
+#include "planeslam/datasets/trajectory_io.hpp"
+#include "planeslam/datasets/tum_sequence.hpp"
 
 namespace planeslam::datasets {
 
@@ -115,6 +117,26 @@ void ApplyRangeLimits(OrganizedCloud* cloud, double min_range, double max_range)
   }
 }
 
+namespace {
+
+/// Stamps from the file names when every name has a number and they increase strictly, else the
+/// indices.
+std::vector<double> StampsFromFileNames(const std::vector<std::string>& files) {
+  std::vector<double> stamps(files.size());
+  bool usable = true;
+  for (std::size_t i = 0; i < files.size() && usable; ++i) {
+    const auto t = TimestampFromFileName(files[i]);
+    usable = t.has_value() && (i == 0 || *t > stamps[i - 1]);
+    if (usable) stamps[i] = *t;
+  }
+  if (!usable) {
+    for (std::size_t i = 0; i < files.size(); ++i) stamps[i] = static_cast<double>(i);
+  }
+  return stamps;
+}
+
+}  // namespace
+
 FileSequence::FileSequence(std::string name, std::vector<std::string> files, Loader loader,
                            std::vector<std::optional<Pose>> gt, std::vector<double> stamps)
     : name_(std::move(name)),
@@ -124,17 +146,7 @@ FileSequence::FileSequence(std::string name, std::vector<std::string> files, Loa
       gt_(std::move(gt)) {
   PLANESLAM_CHECK(gt_.empty() || gt_.size() == files_.size(), "one pose per file");
   PLANESLAM_CHECK(stamps_.empty() || stamps_.size() == files_.size(), "one stamp per file");
-  if (!stamps_.empty()) return;
-  stamps_.resize(files_.size());
-  bool usable = true;
-  for (std::size_t i = 0; i < files_.size() && usable; ++i) {
-    const auto t = TimestampFromFileName(files_[i]);
-    usable = t.has_value() && (i == 0 || *t > stamps_[i - 1]);
-    if (usable) stamps_[i] = *t;
-  }
-  if (!usable) {
-    for (std::size_t i = 0; i < files_.size(); ++i) stamps_[i] = static_cast<double>(i);
-  }
+  if (stamps_.empty()) stamps_ = StampsFromFileNames(files_);
 }
 
 Frame FileSequence::Load(std::size_t index) const {
@@ -176,9 +188,20 @@ std::unique_ptr<FileSequence> OpenPcdFolder(const std::string& folder, const Sen
   if (files.empty()) throw IoError(folder, "no .pcd files in folder");
   fs::path p = fs::path(folder).lexically_normal();
   if (p.filename().empty()) p = p.parent_path();
+  // Ground truth beside the scans (TUM format, as `planeslam simulate --sensor spherical` writes
+  // it), matched to the stamps in the file names like TUM's associate.py.
+  std::vector<double> stamps = StampsFromFileNames(files);
+  std::vector<std::optional<Pose>> gt;
+  const fs::path gt_path = p / "groundtruth.txt";
+  std::error_code ec;
+  if (fs::is_regular_file(gt_path, ec)) {
+    gt =
+        AssociateByTime(stamps, ReadTumTrajectory(gt_path.string()), config.gt_max_time_difference);
+  }
   return std::make_unique<FileSequence>(
       p.filename().string(), std::move(files),
-      [config](const std::string& path) { return ReadOrganizedPcd(path, config); });
+      [config](const std::string& path) { return ReadOrganizedPcd(path, config); }, std::move(gt),
+      std::move(stamps));
 }
 
 }  // namespace planeslam::datasets

@@ -390,23 +390,4 @@ double PriorInnovationChi2(const RegistrationResult& result, const MotionPrior& 
   return std::isfinite(chi2) ? chi2 : std::numeric_limits<double>::infinity();
 }
 
-std::vector<double> PlaneMatchChi2(const std::vector<detection::Plane>& prev,
-                                   const std::vector<detection::Plane>& curr,
-                                   const std::vector<PlaneMatch>& matches, const Pose& T_prev_curr,
-                                   const RegistrationConfig& config) {
-  std::vector<double> out;
-  out.reserve(matches.size());
-  for (const PlaneMatch& match : matches) {
-    MatchData m;
-    if (!internal::MakeMatchData(prev, curr, match, config, &m)) {
-      out.push_back(std::numeric_limits<double>::infinity());
-      continue;
-    }
-    const Linearized lin =
-        internal::Linearize(m, T_prev_curr.linear(), T_prev_curr.translation(), config);
-    out.push_back(lin.r.dot(lin.W * lin.r));
-  }
-  return out;
-}
-
 }  // namespace planeslam::registration

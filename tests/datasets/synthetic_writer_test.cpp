@@ -1,19 +1,19 @@
 // Synthetic sequences on disk: read back through the TUM / PCD readers with exact ground truth,
 // labels and planes.json, and byte-identical files for identical seeds.
+#include "planeslam/datasets/synthetic_writer.hpp"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
-#include <nlohmann/json.hpp>
-
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "planeslam/datasets/image_io.hpp"
 #include "planeslam/datasets/pcd_io.hpp"
 #include "planeslam/datasets/sequence_factory.hpp"
-#include "planeslam/datasets/synthetic_writer.hpp"
 #include "planeslam/datasets/tum_sequence.hpp"
 #include "test_support.hpp"
 
@@ -145,6 +145,12 @@ TEST(SyntheticWriter, SphericalScansAreOrganizedPcd) {
   ASSERT_EQ(opened->Size(), seq.Size());
   EXPECT_EQ(opened->Timestamp(1), seq.Timestamp(1));
   EXPECT_EQ(opened->Load(1).cloud.model, SensorModel::kSpherical);
+  // The ground truth written beside the scans comes back with them.
+  for (std::size_t i = 0; i < seq.Size(); ++i) {
+    const auto gt = opened->GroundTruth(i);
+    ASSERT_TRUE(gt.has_value()) << i;
+    EXPECT_TRUE(gt->isApprox(seq.Generate(i).frame.T_world_sensor_gt.value(), 1e-9)) << i;
+  }
 }
 
 TEST(SyntheticWriter, PreviewShowsDepthAndLabels) {

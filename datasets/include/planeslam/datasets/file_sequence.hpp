@@ -52,8 +52,10 @@ class FileSequence : public Sequence {
 };
 
 /// A folder of organized PCD files (coordinates times config.unit_scale, grid model
-/// config.pcd_model). Throws IoError for a missing folder or one without .pcd files. A cloud with
-/// HEIGHT 1 (unorganized) is refused when loaded.
+/// config.pcd_model). A `groundtruth.txt` beside them (TUM format) gives each file the pose with
+/// the nearest stamp within config.gt_max_time_difference. Throws IoError for a missing folder,
+/// one without .pcd files, or a bad groundtruth.txt. A cloud with HEIGHT 1 (unorganized) is
+/// refused when loaded.
 std::unique_ptr<FileSequence> OpenPcdFolder(const std::string& folder, const SensorConfig& config);
 
 /// Reads one organized PCD with the config's unit scale, model and range limits; refuses an

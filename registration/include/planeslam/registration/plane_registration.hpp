@@ -109,11 +109,4 @@ RegistrationResult RegisterPlanes(const std::vector<detection::Plane>& prev,
 /// (SLAM tracking) a motion that disagrees with the constant-velocity prediction.
 double PriorInnovationChi2(const RegistrationResult& result, const MotionPrior& prior);
 
-/// Per-match whitened squared residual (3 dof) of `matches` under the motion T_prev_curr (used by
-/// association to verify candidates).
-std::vector<double> PlaneMatchChi2(const std::vector<detection::Plane>& prev,
-                                   const std::vector<detection::Plane>& curr,
-                                   const std::vector<PlaneMatch>& matches, const Pose& T_prev_curr,
-                                   const RegistrationConfig& config = {});
-
 }  // namespace planeslam::registration
