@@ -1,18 +1,60 @@
 // SlamSystem in process on the first 60 frames of the synthetic room (noise on): the large map
-// planes are the scene's planes (normal within 1 deg, offset within 3 cm) and none is mapped twice.
+// planes are the scene's planes (normal within 1 deg, offset within 3 cm), none is mapped twice,
+// and each one's polygon covers the part of its scene plane the frames saw.
+#include "planeslam/mapping/slam_system.hpp"
+
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <map>
+#include <set>
+#include <utility>
+#include <vector>
 
 #include "planeslam/datasets/synthetic_sequence.hpp"
 #include "planeslam/detection/grid_region_growing.hpp"
-#include "planeslam/mapping/slam_system.hpp"
 
 namespace planeslam::mapping {
 namespace {
 
-TEST(SlamSystem, SyntheticRoomLargeMapPlanesAreSceneplanesOnce) {
+/// The cells (of `cell` metres) of a plane's 2D coordinates (u, v) that the frames saw.
+using CellSet = std::set<std::pair<int, int>>;
+
+/// Area of the seen cells with their holes filled [m^2]: the map's outline polygons have no holes
+/// (a part of a wall hidden behind a box is inside its outline), so the holes count as covered.
+double FilledArea(const CellSet& cells, double cell) {
+  if (cells.empty()) return 0.0;
+  int u0 = cells.begin()->first, u1 = u0, v0 = cells.begin()->second, v1 = v0;
+  for (const auto& [u, v] : cells) {
+    u0 = std::min(u0, u);
+    u1 = std::max(u1, u);
+    v0 = std::min(v0, v);
+    v1 = std::max(v1, v);
+  }
+  // Flood the empty cells reachable from outside the bounding box (grown by one cell).
+  const int w = u1 - u0 + 3, h = v1 - v0 + 3;
+  std::vector<char> outside(static_cast<std::size_t>(w) * h, 0);
+  std::vector<std::pair<int, int>> stack = {{0, 0}};
+  outside[0] = 1;
+  while (!stack.empty()) {
+    const auto [x, y] = stack.back();
+    stack.pop_back();
+    const int nx[4] = {x + 1, x - 1, x, x}, ny[4] = {y, y, y + 1, y - 1};
+    for (int k = 0; k < 4; ++k) {
+      if (nx[k] < 0 || ny[k] < 0 || nx[k] >= w || ny[k] >= h) continue;
+      char& o = outside[static_cast<std::size_t>(ny[k]) * w + nx[k]];
+      if (o || cells.count({nx[k] + u0 - 1, ny[k] + v0 - 1})) continue;
+      o = 1;
+      stack.push_back({nx[k], ny[k]});
+    }
+  }
+  const auto covered = std::count(outside.begin(), outside.end(), 0);
+  return static_cast<double>(covered) * cell * cell;
+}
+
+TEST(SlamSystem, SyntheticRoomLargeMapPlanesAreScenePlanesOnceWithTheirVisibleArea) {
   datasets::SyntheticSequence sequence(
       datasets::SyntheticConfig::ForScene(datasets::SceneKind::kRoom));
   detection::GridParams grid;
@@ -22,9 +64,28 @@ TEST(SlamSystem, SyntheticRoomLargeMapPlanesAreSceneplanesOnce) {
   SlamSystem slam(SlamConfig{}, {}, {}, {}, {}, {});
   slam.SetInitialPose(*sequence.GroundTruth(0));
   const std::size_t frames = std::min<std::size_t>(60, sequence.Size());
+  // Ground truth of what was seen: every pixel labelled with a scene plane, at its true position
+  // (ground-truth pose), in 2 cm cells of the plane's own 2D coordinates.
+  const double cell = 0.02;
+  std::map<int, CellSet> seen;
+  std::map<int, std::pair<Eigen::Vector3d, Eigen::Vector3d>> plane_axes;  // (u, v) per id
+  for (const datasets::ScenePlane& truth : sequence.scene().planes) {
+    const Eigen::Vector3d u = truth.normal.unitOrthogonal();
+    plane_axes[truth.id] = {u, truth.normal.cross(u)};
+  }
   for (std::size_t i = 0; i < frames; ++i) {
-    const datasets::Frame frame = sequence.Load(i);
+    const datasets::SyntheticFrame generated = sequence.Generate(i);
+    const datasets::Frame& frame = generated.frame;
     slam.ProcessFrame(frame.timestamp, frame.cloud, detector.Detect(frame.cloud));
+    const Pose T = *frame.T_world_sensor_gt;
+    for (std::size_t k = 0; k < frame.cloud.points.size(); ++k) {
+      const int id = generated.labels.data[k];
+      if (id == 0 || !datasets::OrganizedCloud::IsValid(frame.cloud.points[k])) continue;
+      const Eigen::Vector3d p = T * frame.cloud.points[k].cast<double>();
+      const auto& [u, v] = plane_axes.at(id);
+      seen[id].insert({static_cast<int>(std::floor(u.dot(p) / cell)),
+                       static_cast<int>(std::floor(v.dot(p) / cell))});
+    }
   }
   slam.Finish();
   std::map<int, int> mapped;  // scene plane id -> large map planes matched to it
@@ -48,7 +109,13 @@ TEST(SlamSystem, SyntheticRoomLargeMapPlanesAreSceneplanesOnce) {
     }
     EXPECT_NE(best, 0) << "map plane " << outline.id << " matches no scene plane";
     EXPECT_LT(best_angle, 1.0) << "map plane " << outline.id;
-    if (best != 0) ++mapped[best];
+    if (best == 0) continue;
+    ++mapped[best];
+    const double visible = FilledArea(seen[best], cell);
+    std::printf("map plane %d = scene plane %d: polygon %.3f m^2, visible %.3f m^2 (%+.1f %%)\n",
+                outline.id, best, outline.polygon.area, visible,
+                100.0 * (outline.polygon.area - visible) / visible);
+    EXPECT_NEAR(outline.polygon.area, visible, 0.15 * visible) << "map plane " << outline.id;
   }
   EXPECT_GE(large, 3);
   for (const auto& [id, count] : mapped) EXPECT_EQ(count, 1) << "scene plane " << id;
