@@ -117,6 +117,10 @@ void VisitOdometry(FieldVisitor& v, registration::PlaneOdometryConfig& c) {
           "[rad] constant-velocity prior: change of the per-frame rotation (1 sigma)", 1e-9, 10.0);
   v.Field("max_prior_gap", c.max_prior_gap,
           "[s] no velocity extrapolation over longer gaps (prior: no motion, weak)", 1e-9, 1e9);
+  v.Field("velocity_window", c.velocity_window,
+          "[s] the predicted velocity is the mean of the motions of this last span (0 = the last "
+          "motion alone)",
+          0.0, 1000.0);
 }
 
 std::vector<std::string> ValidateOdometry(const registration::PlaneOdometryConfig& c) {
@@ -126,6 +130,7 @@ std::vector<std::string> ValidateOdometry(const registration::PlaneOdometryConfi
   scalars.prior_translation_sigma = c.prior_translation_sigma;
   scalars.prior_rotation_sigma = c.prior_rotation_sigma;
   scalars.max_prior_gap = c.max_prior_gap;
+  scalars.velocity_window = c.velocity_window;
   return scalars.Validate();
 }
 

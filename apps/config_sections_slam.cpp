@@ -23,6 +23,10 @@ void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
           "[frames] accept the result anyway after this many refusals in a row", 0, 1000000);
   v.Field("hold_velocity_when_degenerate", c.hold_velocity_when_degenerate,
           "keep the last well-determined velocity on degenerate frames");
+  v.Field("velocity_window", c.velocity_window,
+          "[s] the predicted velocity is the mean of the well-determined motions of this last "
+          "span (0 = the last motion alone)",
+          0.0, 1000.0);
   v.Field("point_to_plane_fill", c.point_to_plane_fill,
           "fill directions the planes leave open by point-to-plane alignment of the clouds");
   v.Field("loop_closure", c.loop_closure, "search and verify loop closures");
@@ -40,8 +44,8 @@ void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
           "[m] RMS plane-offset residual of a verified closure", 0.0, 10.0);
   v.Field("loop_prior_translation_sigma", c.loop_prior_translation_sigma,
           "[m] assumed drift (1-sigma) of the relative pose to a loop candidate", 1e-6, 100.0);
-  v.Field("loop_prior_rotation_sigma", c.loop_prior_rotation_sigma,
-          "[rad] same for rotation", 1e-6, 10.0);
+  v.Field("loop_prior_rotation_sigma", c.loop_prior_rotation_sigma, "[rad] same for rotation", 1e-6,
+          10.0);
 }
 
 std::vector<std::string> ValidateSlam(const mapping::SlamConfig& c) { return c.Validate(); }

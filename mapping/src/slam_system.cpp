@@ -2,7 +2,6 @@
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -55,11 +54,11 @@ std::vector<std::string> SlamConfig::Validate() const {
   }
   if (loop_min_matches < 3) problems.push_back("loop_min_matches must be >= 3");
   if (loop_min_keyframe_gap < 1) problems.push_back("loop_min_keyframe_gap must be >= 1");
+  if (!(velocity_window >= 0)) problems.push_back("velocity_window must be >= 0");
   return problems;
 }
 
-SlamSystem::SlamSystem(const SlamConfig& config,
-                       const registration::AssociationConfig& association,
+SlamSystem::SlamSystem(const SlamConfig& config, const registration::AssociationConfig& association,
                        const registration::RegistrationConfig& registration,
                        const registration::PointToPlaneConfig& point_to_plane,
                        const PoseGraphConfig& pose_graph, const PlaneMapConfig& plane_map)
@@ -68,7 +67,8 @@ SlamSystem::SlamSystem(const SlamConfig& config,
       registration_config_(registration),
       point_to_plane_config_(point_to_plane),
       pose_graph_config_(pose_graph),
-      map_(plane_map) {
+      map_(plane_map),
+      velocity_(config.velocity_window) {
   const auto problems = config_.Validate();
   PLANESLAM_CHECK(problems.empty(), problems.front());
 }
@@ -115,7 +115,8 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
   const auto track_start = std::chrono::steady_clock::now();
   const Keyframe& keyframe = keyframes_.back();
   registration::MotionPrior prior;
-  prior.T_prev_curr = T_keyframe_last_ * velocity_;  // constant velocity
+  const double dt = timestamp - frames_.back().timestamp;
+  prior.T_prev_curr = T_keyframe_last_ * velocity_.Predict(dt);  // constant velocity
   prior.covariance =
       DiagonalCovariance(config_.prior_translation_sigma, config_.prior_rotation_sigma);
   const registration::AssociationResult association = registration::AssociatePlanes(
@@ -154,8 +155,9 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
   // An update along directions the planes left open would feed the prior back into itself.
   // (Updating only along the determined directions was tried: synthetic room ATE 5.8 -> 72 cm.)
   if (!(result.degenerate && config_.hold_velocity_when_degenerate)) {
-    velocity_ = T_keyframe_last_.inverse() * T_keyframe_curr;
+    velocity_.Add(timestamp, dt, T_keyframe_last_.inverse() * T_keyframe_curr);
   }
+
   T_keyframe_last_ = T_keyframe_curr;
   result.T_world_sensor = KeyframePose(keyframe.id) * T_keyframe_curr;
 
@@ -218,8 +220,8 @@ int SlamSystem::SearchLoopClosures(const Keyframe& current) {
     ++stats_.loop_candidates;
     registration::MotionPrior prior;
     prior.T_prev_curr = KeyframePose(old.id).inverse() * T_world_current;
-    prior.covariance = DiagonalCovariance(config_.loop_prior_translation_sigma,
-                                          config_.loop_prior_rotation_sigma);
+    prior.covariance =
+        DiagonalCovariance(config_.loop_prior_translation_sigma, config_.loop_prior_rotation_sigma);
     const registration::AssociationResult association = registration::AssociatePlanes(
         old.planes, current.planes, prior, association_config_, registration_config_);
     const registration::RegistrationResult& reg = association.registration;

@@ -13,11 +13,15 @@ std::vector<std::string> PlaneOdometryConfig::Validate() const {
   if (!(prior_translation_sigma > 0)) p.push_back("prior_translation_sigma must be > 0");
   if (!(prior_rotation_sigma > 0)) p.push_back("prior_rotation_sigma must be > 0");
   if (!(max_prior_gap > 0)) p.push_back("max_prior_gap must be > 0");
+  if (!(velocity_window >= 0)) p.push_back("velocity_window must be >= 0");
   return p;
 }
 
 PlaneOdometry::PlaneOdometry(PlaneOdometryConfig config, const Pose& T_world_first)
-    : config_(std::move(config)), T_world_first_(T_world_first), T_world_sensor_(T_world_first) {}
+    : config_(std::move(config)),
+      T_world_first_(T_world_first),
+      T_world_sensor_(T_world_first),
+      velocity_(config_.velocity_window) {}
 
 void PlaneOdometry::Reset(const Pose& T_world_first) {
   T_world_first_ = T_world_first;
@@ -26,8 +30,7 @@ void PlaneOdometry::Reset(const Pose& T_world_first) {
   have_prev_ = false;
   prev_planes_.clear();
   prev_cloud_ = {};
-  have_velocity_ = false;
-  last_motion_ = Pose::Identity();
+  velocity_.Clear();
   last_dt_ = 0.0;
   frames_ = 0;
 }
@@ -35,13 +38,12 @@ void PlaneOdometry::Reset(const Pose& T_world_first) {
 MotionPrior PlaneOdometry::Predict(double timestamp) const {
   MotionPrior prior;  // "no motion", weak: used without a velocity or across a long gap
   const double dt = timestamp - prev_stamp_;
-  if (!have_velocity_ || !(dt > 0) || !(dt <= config_.max_prior_gap) || !(last_dt_ > 0)) {
+  if (velocity_.empty() || !(dt > 0) || !(dt <= config_.max_prior_gap) || !(last_dt_ > 0)) {
     return prior;
   }
-  // Constant velocity: the last motion scaled to this interval in the (t, log R) tangent.
+  // Constant velocity, scaled to this interval in the (t, log R) tangent.
   const double ratio = dt / last_dt_;
-  const Vector6d v = BoxMinus(last_motion_, Pose::Identity()) * ratio;
-  prior.T_prev_curr = BoxPlus(Pose::Identity(), v);
+  prior.T_prev_curr = velocity_.Predict(dt);
   // The velocity may change by about sigma per frame interval of this length.
   const double scale = std::max(ratio, 1e-3);
   Vector6d sig;
@@ -107,8 +109,7 @@ OdometryStep PlaneOdometry::Step(double timestamp, const std::vector<detection::
         Eigen::Quaterniond(T_world_sensor_.linear()).normalized().toRotationMatrix();
     step.T_world_sensor = T_world_sensor_;
     const double dt = timestamp - prev_stamp_;
-    have_velocity_ = dt > 0;
-    last_motion_ = step.T_prev_curr;
+    velocity_.Add(timestamp, dt, step.T_prev_curr);
     last_dt_ = dt;
   }
   trajectory_.Add(timestamp, T_world_sensor_);

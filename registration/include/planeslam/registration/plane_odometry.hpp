@@ -14,6 +14,7 @@
 #include "planeslam/registration/plane_association.hpp"
 #include "planeslam/registration/plane_registration.hpp"
 #include "planeslam/registration/point_to_plane.hpp"
+#include "planeslam/registration/velocity_model.hpp"
 
 namespace planeslam::registration {
 
@@ -31,6 +32,9 @@ struct PlaneOdometryConfig {
   /// Velocity is not extrapolated over a gap longer than this; the prior is then "no motion"
   /// with MotionPrior's weak default covariance [s].
   double max_prior_gap = 1.0;
+  /// The predicted velocity is the mean rate of the motions of the last this many seconds
+  /// (VelocityModel); 0 = the last motion alone [s].
+  double velocity_window = 0.5;
 
   /// Problems in this struct and the nested ones, empty when fine.
   std::vector<std::string> Validate() const;
@@ -91,9 +95,8 @@ class PlaneOdometry {
   double prev_stamp_ = 0.0;
   std::vector<detection::Plane> prev_planes_;
   datasets::OrganizedCloud prev_cloud_;
-  bool have_velocity_ = false;
-  Pose last_motion_ = Pose::Identity();
-  double last_dt_ = 0.0;
+  VelocityModel velocity_;
+  double last_dt_ = 0.0;  ///< interval of the last motion, the prior's unit of time
   std::size_t frames_ = 0;
 };
 

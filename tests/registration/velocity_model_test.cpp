@@ -1,0 +1,60 @@
+// Constant-velocity prediction from recent motions: mean rate over a time window, scaled to the
+// next interval, forgetting what is older than the window.
+#include "planeslam/registration/velocity_model.hpp"
+
+#include <gtest/gtest.h>
+
+namespace planeslam::registration {
+namespace {
+
+Pose Motion(double tx, double yaw) {
+  Pose T = Pose::Identity();
+  T.linear() = ExpSO3(Eigen::Vector3d(0.0, 0.0, yaw));
+  T.translation() << tx, 0.0, 0.0;
+  return T;
+}
+
+TEST(VelocityModel, WithoutMotionsOrIntervalPredictsNoMotion) {
+  VelocityModel model(0.5);
+  EXPECT_TRUE(model.Predict(0.033).isApprox(Pose::Identity()));
+  model.Add(1.0, 0.0, Motion(0.1, 0.1));  // no interval: ignored
+  EXPECT_TRUE(model.empty());
+  model.Add(1.0, 0.033, Motion(0.1, 0.1));
+  EXPECT_TRUE(model.Predict(0.0).isApprox(Pose::Identity()));
+}
+
+TEST(VelocityModel, ConstantMotionIsPredictedAndScaledToTheInterval) {
+  VelocityModel model(0.5);
+  for (int i = 1; i <= 10; ++i) model.Add(0.1 * i, 0.1, Motion(0.01, 0.002));
+  const Pose same = model.Predict(0.1);
+  EXPECT_NEAR(same.translation().x(), 0.01, 1e-12);
+  EXPECT_NEAR(BoxMinus(same, Pose::Identity())(5), 0.002, 1e-12);
+  // Twice the interval (a dropped frame): twice the motion.
+  EXPECT_NEAR(model.Predict(0.2).translation().x(), 0.02, 1e-12);
+}
+
+TEST(VelocityModel, OneBadMotionIsAveragedNotHeld) {
+  // Ten motions of 1 cm and one wrong by 5 cm: the window's mean is off by 5/11 cm, the last
+  // motion alone (window 0) by the whole 5 cm.
+  VelocityModel windowed(1.0), last_only(0.0);
+  for (int i = 1; i <= 10; ++i) {
+    windowed.Add(0.033 * i, 0.033, Motion(0.01, 0.0));
+    last_only.Add(0.033 * i, 0.033, Motion(0.01, 0.0));
+  }
+  windowed.Add(0.033 * 11, 0.033, Motion(0.06, 0.0));
+  last_only.Add(0.033 * 11, 0.033, Motion(0.06, 0.0));
+  EXPECT_NEAR(windowed.Predict(0.033).translation().x(), 0.01 + 0.05 / 11, 1e-12);
+  EXPECT_NEAR(last_only.Predict(0.033).translation().x(), 0.06, 1e-12);
+}
+
+TEST(VelocityModel, MotionsOlderThanTheWindowAreForgotten) {
+  VelocityModel model(0.25);
+  for (int i = 1; i <= 10; ++i) model.Add(0.1 * i, 0.1, Motion(0.01, 0.0));
+  for (int i = 11; i <= 13; ++i) model.Add(0.1 * i, 0.1, Motion(0.03, 0.0));
+  // The motions ending at 1.1, 1.2 and 1.3 s are within 0.25 s of the latest; the 1 cm ones,
+  // which ended at 1.0 s or earlier, are gone.
+  EXPECT_NEAR(model.Predict(0.1).translation().x(), 0.03, 1e-12);
+}
+
+}  // namespace
+}  // namespace planeslam::registration
