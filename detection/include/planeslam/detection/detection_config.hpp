@@ -54,7 +54,7 @@ struct DetectionParams {
   bool merge_regions = true;     ///< merge adjacent regions that describe one surface
   double merge_angle_deg = 5.0;  ///< merge: max angle between the two normals [deg]
   /// Merge also regions that do not touch (a surface seen on both sides of an occluder). Off by
-  /// default, as in the paper; on in the Kinect config (TUM fr3 SLAM ATE 2.81 -> 1.28 cm: the
+  /// default, as in the paper; on in the Kinect config (TUM fr3 SLAM ATE 1.76 -> 1.29 cm: the
   /// floor on both sides of the structure becomes one plane) and the simulator's (its ground
   /// truth counts a split plane as over-segmented).
   bool merge_disjoint = false;

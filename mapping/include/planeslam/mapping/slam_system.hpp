@@ -45,8 +45,8 @@ struct SlamConfig {
   /// 0.05 m / 0.05 rad, although the real change of velocity is smaller (TUM fr3 ground truth:
   /// 4 mm per frame at the 99th percentile): tighter, the association's prior preference and the
   /// gate below refuse the small planes that fix directions the large ones leave open (measured
-  /// 2026-11-30 without disjoint merging: TUM fr3 ATE 2.81 cm at 0.05, 11.8 cm at 0.03 and 0.02;
-  /// synthetic room 6.6 / 6.8 / 7.2 cm).
+  /// 2026-11-30 without disjoint merging and with the last motion as velocity: TUM fr3 ATE
+  /// 2.81 cm at 0.05, 11.8 cm at 0.03 and 0.02; synthetic room 6.6 / 6.8 / 7.2 cm).
   double prior_translation_sigma = 0.05;
   double prior_rotation_sigma = 0.05;
   /// A tracking result whose correction to the prior has a chi-square (6 dof, prior + result
