@@ -157,7 +157,6 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
   if (!(result.degenerate && config_.hold_velocity_when_degenerate)) {
     velocity_.Add(timestamp, dt, T_keyframe_last_.inverse() * T_keyframe_curr);
   }
-
   T_keyframe_last_ = T_keyframe_curr;
   result.T_world_sensor = KeyframePose(keyframe.id) * T_keyframe_curr;
 
