@@ -9,6 +9,7 @@
 #include <random>
 #include <set>
 
+#include "mapping/covered_cells.hpp"
 #include "planeslam/datasets/errors.hpp"
 
 namespace planeslam::mapping {
@@ -130,32 +131,7 @@ std::vector<Pose> RoomPoses() {
 double FilledArea(const Rect& r, double h, const std::vector<bool>& seen) {
   const int na = static_cast<int>(std::round(r.a.norm() / h));
   const int nb = static_cast<int>(std::round(r.b.norm() / h));
-  std::vector<bool> outside(seen.size(), false);
-  std::vector<std::pair<int, int>> stack;
-  auto push = [&](int i, int j) {
-    if (i < 0 || j < 0 || i >= na || j >= nb) return;
-    const std::size_t k = static_cast<std::size_t>(i) * nb + j;
-    if (seen[k] || outside[k]) return;
-    outside[k] = true;
-    stack.emplace_back(i, j);
-  };
-  for (int i = 0; i < na; ++i) {
-    push(i, 0);
-    push(i, nb - 1);
-  }
-  for (int j = 0; j < nb; ++j) {
-    push(0, j);
-    push(na - 1, j);
-  }
-  while (!stack.empty()) {
-    const auto [i, j] = stack.back();
-    stack.pop_back();
-    push(i + 1, j);
-    push(i - 1, j);
-    push(i, j + 1);
-    push(i, j - 1);
-  }
-  return static_cast<double>(std::count(outside.begin(), outside.end(), false)) * h * h;
+  return static_cast<double>(test::CoveredCells(seen, na, nb)) * h * h;
 }
 
 /// The map plane closest to the infinite plane through `r` (unoriented), and its distance measures.

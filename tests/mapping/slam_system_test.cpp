@@ -13,6 +13,7 @@
 #include <utility>
 #include <vector>
 
+#include "mapping/covered_cells.hpp"
 #include "planeslam/datasets/synthetic_sequence.hpp"
 #include "planeslam/detection/grid_region_growing.hpp"
 
@@ -22,8 +23,7 @@ namespace {
 /// The cells (of `cell` metres) of a plane's 2D coordinates (u, v) that the frames saw.
 using CellSet = std::set<std::pair<int, int>>;
 
-/// Area of the seen cells with their holes filled [m^2]: the map's outline polygons have no holes
-/// (a part of a wall hidden behind a box is inside its outline), so the holes count as covered.
+/// Area of the seen cells with their holes filled [m^2] (map outlines have no holes).
 double FilledArea(const CellSet& cells, double cell) {
   if (cells.empty()) return 0.0;
   int u0 = cells.begin()->first, u1 = u0, v0 = cells.begin()->second, v1 = v0;
@@ -33,25 +33,10 @@ double FilledArea(const CellSet& cells, double cell) {
     v0 = std::min(v0, v);
     v1 = std::max(v1, v);
   }
-  // Flood the empty cells reachable from outside the bounding box (grown by one cell).
-  const int w = u1 - u0 + 3, h = v1 - v0 + 3;
-  std::vector<char> outside(static_cast<std::size_t>(w) * h, 0);
-  std::vector<std::pair<int, int>> stack = {{0, 0}};
-  outside[0] = 1;
-  while (!stack.empty()) {
-    const auto [x, y] = stack.back();
-    stack.pop_back();
-    const int nx[4] = {x + 1, x - 1, x, x}, ny[4] = {y, y, y + 1, y - 1};
-    for (int k = 0; k < 4; ++k) {
-      if (nx[k] < 0 || ny[k] < 0 || nx[k] >= w || ny[k] >= h) continue;
-      char& o = outside[static_cast<std::size_t>(ny[k]) * w + nx[k]];
-      if (o || cells.count({nx[k] + u0 - 1, ny[k] + v0 - 1})) continue;
-      o = 1;
-      stack.push_back({nx[k], ny[k]});
-    }
-  }
-  const auto covered = std::count(outside.begin(), outside.end(), 0);
-  return static_cast<double>(covered) * cell * cell;
+  const int w = u1 - u0 + 1, h = v1 - v0 + 1;
+  std::vector<bool> seen(static_cast<std::size_t>(w) * h, false);
+  for (const auto& [u, v] : cells) seen[static_cast<std::size_t>(u - u0) * h + (v - v0)] = true;
+  return static_cast<double>(test::CoveredCells(seen, w, h)) * cell * cell;
 }
 
 TEST(SlamSystem, SyntheticRoomLargeMapPlanesAreScenePlanesOnceWithTheirVisibleArea) {

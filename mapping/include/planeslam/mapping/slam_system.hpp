@@ -15,7 +15,6 @@
 /// graph is optimised and the map re-fitted.
 #include <cstddef>
 #include <cstdint>
-#include <deque>
 #include <optional>
 #include <string>
 #include <unordered_map>
@@ -63,8 +62,8 @@ struct SlamConfig {
   /// The velocity of the constant-velocity prediction is the mean rate of the well-determined
   /// frame-to-frame motions of the last this many seconds (0: the last one alone). A single
   /// frame's error then does not become the velocity held through a degenerate stretch (synthetic
-  /// room, noise seeds 1-3: ATE 6.6 / 8.2 / 24.1 cm with the last motion alone, 3.9 / 4.5 / 3.4
-  /// cm with 0.5 s; TUM fr3 1.29 -> 1.30 cm) [s].
+  /// room, noise seeds 1-3: ATE 6.6 / 8.2 / 24.1 cm with the last motion alone, 3.8 / 4.3 / 3.4
+  /// cm with 0.5 s; TUM fr3 1.29 cm both) [s].
   double velocity_window = 0.5;
   /// Fill directions the planes leave open by point-to-plane alignment of the clouds. Off by
   /// default: on the synthetic room (first 320 frames, noise on) it raised ATE from 5.3 to 7.7 cm,
