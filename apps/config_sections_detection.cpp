@@ -9,10 +9,11 @@ namespace {
 
 void VisitDetection(FieldVisitor& v, DetectionSection& c) {
   auto& p = c.params;
-  v.Field("method", c.method,
-          "detector: grid (GBRG, grid.cell_size), grid3/4/5, grid-paper (no refinement/merge), "
-          "point (PBRG), point-exact (refit per point), point-paper",
-          DetectorMethods());
+  v.Field(
+      "method", c.method,
+      "detector: grid (GBRG, grid.cell_size), grid3/4/5, grid-paper (no refinement/merge/ray fit), "
+      "point (PBRG), point-exact (refit per point), point-paper (no merge/ray fit)",
+      DetectorMethods());
   v.Field("threshold_model", c.threshold_model,
           "constant: the paper's fixed thresholds; depth: thresholds grow with the sensor noise "
           "sigma(z) = sigma0 + sigma_z2 z^2 along the ray (depth cameras)",
@@ -51,6 +52,9 @@ void VisitDetection(FieldVisitor& v, DetectionSection& c) {
   v.Field("merge_disjoint", p.merge_disjoint,
           "merging: also merge regions that do not touch (a surface seen on both sides of an "
           "occluder)");
+  v.Field("ray_fit", p.ray_fit,
+          "final planes by least squares of inverse depth along the pixel rays (unbiased under "
+          "ray noise); false: the paper's eigen fit");
 }
 
 std::vector<std::string> ValidateDetection(const DetectionSection& c) {

@@ -45,6 +45,7 @@ std::unique_ptr<detection::PlaneDetector> MakeDetector(const std::string& method
     if (method == "grid-paper") {
       params.refine_boundary = false;
       params.merge_regions = false;
+      params.ray_fit = false;
     }
     auto problems = params.Validate();
     auto more = grid.Validate();
@@ -54,7 +55,10 @@ std::unique_ptr<detection::PlaneDetector> MakeDetector(const std::string& method
   }
   if (method == "point" || method == "point-exact" || method == "point-paper") {
     if (method != "point") point.refit_interval = 1;
-    if (method == "point-paper") params.merge_regions = false;
+    if (method == "point-paper") {
+      params.merge_regions = false;
+      params.ray_fit = false;
+    }
     auto problems = params.Validate();
     auto more = point.Validate();
     problems.insert(problems.end(), more.begin(), more.end());

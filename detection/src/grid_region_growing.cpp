@@ -407,7 +407,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   if (params_.merge_regions) {
     internal::MergeCoplanarRegions(ws.labels, width, height, ws.regions, params_);
   }
-  internal::FinalizeSegmentation(ws.labels, width, height, ws.regions, out);
+  internal::FinalizeSegmentation(cloud, ws.labels, ws.regions, params_, out);
   out.cell_classes = ws.classes;
   const auto t5 = Clock::now();
   out.timings_ms = {{"moments", Ms(t0, t1)},

@@ -27,7 +27,13 @@ void MergeCoplanarRegions(std::vector<std::int32_t>& labels, int width, int heig
 
 /// Builds the output: one Plane per region with k >= 3 (sorted by point count descending, then by
 /// region index), labels rewritten to plane ids (>= 1) or -1, covariance from the region noise.
-void FinalizeSegmentation(const std::vector<std::int32_t>& region_labels, int width, int height,
-                          const std::vector<MomentSums>& regions, Segmentation& out);
+/// The plane is the eigen fit of the region's moments, or with params.ray_fit the inverse-depth
+/// fit over its pixels in `cloud` (the eigen fit where that is degenerate).
+/// The ray fit also drops the pixels it finds far off the plane from `region_labels` and
+/// `regions` (see FitAlongRays in the source).
+void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
+                          std::vector<std::int32_t>& region_labels,
+                          std::vector<MomentSums>& regions, const DetectionParams& params,
+                          Segmentation& out);
 
 }  // namespace planeslam::detection::internal
