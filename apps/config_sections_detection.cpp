@@ -35,6 +35,10 @@ void VisitDetection(FieldVisitor& v, DetectionSection& c) {
           1000.0);
   v.Field("epsilon_sigmas", p.epsilon_sigmas,
           "depth model: sqrt(epsilon) + this many rms sigma_n of the region [1]", 0.0, 100.0);
+  v.Field("epsilon_count_sigmas", p.epsilon_count_sigmas,
+          "depth model: the epsilon factor grows by this many sqrt(2/K) for a region of K points "
+          "(the spread of its MSE under the noise model) [1]",
+          0.0, 100.0);
   v.Field("eta_sigmas", p.eta_sigmas,
           "depth model: eta + this many std devs of a grid's normal noise [1]", 0.0, 100.0);
   v.Field("planar_sigmas", p.planar_sigmas,

@@ -270,7 +270,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       const FastFit merged_fit = RefitFrom(merged, fit.normal);
       const double merged_tilt = merged.NormalTilt(merged_fit.l2);
       const double expected = merged.EffectiveMse(merged_fit.normal, merged_tilt);
-      if (merged_fit.mse >= params_.Epsilon(expected)) continue;
+      if (merged_fit.mse >= params_.Epsilon(expected, merged.k)) continue;
       region = merged;
       fit = merged_fit;  // eq. (5): plane parameters updated on every join
       if (depth_model) update_tilt(merged_tilt);

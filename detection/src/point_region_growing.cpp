@@ -192,22 +192,25 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
           const double dist = std::abs(fit.normal.dot(pc) - fit.d);
           if (dist >= gamma_for(fit, region)) continue;
           const double eps =
-              params_.Epsilon(merged.EffectiveMse(fit.normal, merged.NormalTilt(fit.l2)));
+              params_.Epsilon(merged.EffectiveMse(fit.normal, merged.NormalTilt(fit.l2)), merged.k);
           if (MseAbout(merged, fit.normal) < eps) {
             accept = true;
           } else {
             new_fit = RefitFrom(merged, fit.normal);
             refitted = true;
-            accept = new_fit.mse < params_.Epsilon(merged.EffectiveMse(
-                                       new_fit.normal, merged.NormalTilt(new_fit.l2)));
+            accept =
+                new_fit.mse <
+                params_.Epsilon(merged.EffectiveMse(new_fit.normal, merged.NormalTilt(new_fit.l2)),
+                                merged.k);
           }
         } else {
           new_fit = RefitFrom(merged, fit.normal);
           refitted = true;
           const double dist = std::abs(new_fit.normal.dot(pc) - new_fit.d);
           accept = dist < gamma_for(new_fit, merged) &&
-                   new_fit.mse < params_.Epsilon(merged.EffectiveMse(
-                                     new_fit.normal, merged.NormalTilt(new_fit.l2)));
+                   new_fit.mse < params_.Epsilon(merged.EffectiveMse(new_fit.normal,
+                                                                     merged.NormalTilt(new_fit.l2)),
+                                                 merged.k);
         }
         if (!accept) continue;
         if (owner >= 0) {

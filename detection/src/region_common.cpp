@@ -273,7 +273,7 @@ void MergeCoplanarRegions(std::vector<std::int32_t>& labels, int width, int heig
     MomentSums u = ra;
     u.Merge(rb);
     const FastFit fu = FitSums(u);
-    if (fu.mse >= params.Epsilon(u.ExpectedMse(fu.normal))) return false;
+    if (fu.mse >= params.Epsilon(u.ExpectedMse(fu.normal), u.k)) return false;
     if (!touching) {
       if (std::abs(fu.normal.dot(ra.Centroid()) - fu.d) > params.gamma) return false;
       if (std::abs(fu.normal.dot(rb.Centroid()) - fu.d) > params.gamma) return false;

@@ -26,8 +26,12 @@ const char* ToString(ThresholdModel model);
 ///   gamma(g)   = gamma + gamma_sigmas sigma_n(centre of g)  (a grid's centre of K points is
 ///                sqrt(K) times less noisy than a point; PBRG tests single points),
 ///   delta(z)   = delta + delta_sigmas sigma(z),
-///   epsilon(R) = (sqrt(epsilon) + epsilon_sigmas sigma_n,rms(R))^2 with sigma_n,rms^2 the
-///                expected MSE of the region's own points about its plane,
+///   epsilon(R) = (sqrt(epsilon) + (epsilon_sigmas + epsilon_count_sigmas sqrt(2 / K))
+///                sigma_n,rms(R))^2 with sigma_n,rms^2 the expected MSE of the region's own K
+///                points about its plane (sqrt(2 / K) is the relative spread of the MSE of K
+///                points under the model: with epsilon_count_sigmas the bound tightens towards
+///                the model's noise as a region grows; 0 by default, as real sensors have
+///                roughness the model lacks),
 ///   eta(g)     = eta + eta_sigmas sigma_n,rms(g) / sqrt(lambda2(g))  (normal noise of a small
 ///                grid, Var(n) ~ sigma^2 / lambda2 of its scatter; 90 deg or more = no test),
 /// and a grid also counts as planar when its MSE is within (planar_sigmas sigma_n,rms)^2 (at 4 m
@@ -44,8 +48,9 @@ struct DetectionParams {
   double sigma_z2 = 1.425e-3;  ///< quadratic depth noise [1/m] (Kinect: Khoshelham & Elberink 2012)
   double gamma_sigmas = 3.0;   ///< depth model: gamma grows by this many sigma(z)
   double delta_sigmas = 8.0;   ///< depth model: delta grows by this many sigma(z)
-  double epsilon_sigmas = 1.5;  ///< depth model: sqrt(epsilon) grows by this many sigma_rms
-  double eta_sigmas = 3.0;      ///< depth model: eta grows by this many normal std devs
+  double epsilon_sigmas = 1.5;        ///< depth model: sqrt(epsilon) grows by this many sigma_rms
+  double epsilon_count_sigmas = 0.0;  ///< depth model: plus this many sqrt(2 / K) (see Epsilon)
+  double eta_sigmas = 3.0;            ///< depth model: eta grows by this many normal std devs
   double planar_sigmas =
       1.5;  ///< depth model: grids with rms residual below this many sigma are planar
   bool refine_boundary = true;   ///< give edge pixels of non-planar grids to an adjacent plane
@@ -91,9 +96,10 @@ struct DetectionParams {
     return model == ThresholdModel::kDepth ? delta + delta_sigmas * Sigma(z) : delta;
   }
   /// MSE bound for a region whose expected MSE under the noise model is `expected_mse` [m^2].
-  double Epsilon(double expected_mse) const {
+  double Epsilon(double expected_mse, double k) const {
     if (model != ThresholdModel::kDepth) return epsilon;
-    const double r = std::sqrt(epsilon) + epsilon_sigmas * std::sqrt(std::max(expected_mse, 0.0));
+    const double sigmas = epsilon_sigmas + epsilon_count_sigmas * std::sqrt(2.0 / std::max(k, 1.0));
+    const double r = std::sqrt(epsilon) + sigmas * std::sqrt(std::max(expected_mse, 0.0));
     return r * r;
   }
   /// Problems with the values (empty when fine).
