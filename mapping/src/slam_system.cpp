@@ -162,7 +162,7 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
 
   const bool moved = T_keyframe_curr.translation().norm() > config_.keyframe_translation ||
                      RotationAngle(T_keyframe_curr) > config_.keyframe_rotation_deg * kDegToRad;
-  const bool weak = result.matches < config_.keyframe_min_matches;
+  const bool weak = result.matches < config_.keyframe_min_matches && result.matches < result.planes;
   if (!(moved || weak)) {
     frames_.push_back({timestamp, keyframe.id, T_keyframe_curr});
     return result;
