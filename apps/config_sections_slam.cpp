@@ -11,7 +11,9 @@ void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
   v.Field("keyframe_rotation_deg", c.keyframe_rotation_deg,
           "[deg] new keyframe after this rotation since the last one", 0.01, 180.0);
   v.Field("keyframe_min_matches", c.keyframe_min_matches,
-          "[planes] new keyframe when fewer planes match the keyframe", 0, 100);
+          "[planes] new keyframe when fewer planes match the keyframe (and the frame has planes "
+          "it does not match)",
+          0, 100);
   v.Field("prior_translation_sigma", c.prior_translation_sigma,
           "[m] 1-sigma of the constant-velocity prediction per frame", 1e-6, 100.0);
   v.Field("prior_rotation_sigma", c.prior_rotation_sigma,

@@ -56,8 +56,8 @@ struct RaySums {
   }
 };
 
-/// Solves the ray fit; false when its system is singular or the result is not a plane in front
-/// of the sensor (the caller keeps the eigen fit).
+/// Solves the ray fit (n = m / |m|, d = 1 / |m| > 0); false when its system is singular (rays
+/// spanning a line) or the result is not finite (the caller keeps the eigen fit).
 bool SolveRayFit(const RaySums& t, Eigen::Vector3d& normal, double& d) {
   Eigen::Matrix3d A;
   A << t.a00, t.a01, t.a02, t.a01, t.a11, t.a12, t.a02, t.a12, t.a22;
@@ -181,7 +181,8 @@ std::vector<RayPlane> FitAlongRays(const datasets::OrganizedCloud& cloud,
   // Pixel i's region after this pass (its own when it stays).
   auto competitor = [&](std::size_t i) -> std::int32_t {
     const std::int32_t r = labels[i];
-    if (r < 0 || !planes[r].ok) return r;
+    // A point behind the sensor (possible in a PCD) never entered the ray sums: it stays.
+    if (r < 0 || !planes[r].ok || !(PointDepth(cloud.points[i], spherical) > 0.0f)) return r;
     const int x = static_cast<int>(i % width), y = static_cast<int>(i / width);
     const std::int32_t around[4] = {x > 0 ? labels[i - 1] : -1, x + 1 < width ? labels[i + 1] : -1,
                                     y > 0 ? labels[i - width] : -1,
