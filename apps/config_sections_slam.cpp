@@ -31,6 +31,16 @@ void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
           0.0, 1000.0);
   v.Field("point_to_plane_fill", c.point_to_plane_fill,
           "fill directions the planes leave open by point-to-plane alignment of the clouds");
+  v.Field("plane_landmarks", c.plane_landmarks,
+          "optimise the map planes seen from two or more keyframes with the poses");
+  v.Field("landmark_normal_sigma", c.landmark_normal_sigma,
+          "[rad] floor of a detected plane's normal sigma in the landmark residuals", 1e-6, 1.0);
+  v.Field("landmark_offset_sigma", c.landmark_offset_sigma,
+          "[m] floor of a detected plane's offset sigma in the landmark residuals", 1e-6, 10.0);
+  v.Field("landmark_gate_deg", c.landmark_gate_deg,
+          "[deg] a detection joins its map plane's landmark only within this angle", 0.0, 90.0);
+  v.Field("landmark_gate_offset", c.landmark_gate_offset,
+          "[m] and within this offset (at the current poses)", 0.0, 10.0);
   v.Field("loop_closure", c.loop_closure, "search and verify loop closures");
   v.Field("loop_search_radius", c.loop_search_radius,
           "[m] loop candidates are keyframes within this distance", 0.0, 1000.0);

@@ -2,6 +2,7 @@
 #include "planeslam/mapping/pose_graph.hpp"
 
 #include <ceres/ceres.h>
+#include <ceres/sphere_manifold.h>
 
 #include <Eigen/Cholesky>
 #include <algorithm>
@@ -163,6 +164,37 @@ class RelativePoseError {
   Matrix6d sqrt_information_;
 };
 
+/// A node's observation of a plane landmark: residual (R^T n_w - n_obs) / sigma_n (3, of which
+/// two count: both normals are unit) and (d_w - n_w.p - d_obs) / sigma_d, with the node pose
+/// (p, q) = T_world_node and the landmark (n_w, d_w) in the world.
+class PlaneObservationError {
+ public:
+  explicit PlaneObservationError(const PlaneLandmarkObservation& obs) : obs_(obs) {}
+
+  template <typename T>
+  bool operator()(const T* p_ptr, const T* q_ptr, const T* n_ptr, const T* d_ptr,
+                  T* residual_ptr) const {
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> p(p_ptr);
+    const Eigen::Map<const Eigen::Quaternion<T>> q(q_ptr);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> n(n_ptr);
+    const Eigen::Matrix<T, 3, 1> n_node = q.conjugate() * n;
+    const T d_node = d_ptr[0] - n.dot(p);
+    for (int k = 0; k < 3; ++k) {
+      residual_ptr[k] = (n_node[k] - T(obs_.normal[k])) / T(obs_.normal_sigma);
+    }
+    residual_ptr[3] = (d_node - T(obs_.d)) / T(obs_.offset_sigma);
+    return true;
+  }
+
+  static ceres::CostFunction* Create(const PlaneLandmarkObservation& obs) {
+    return new ceres::AutoDiffCostFunction<PlaneObservationError, 4, 3, 4, 3, 1>(
+        new PlaneObservationError(obs));
+  }
+
+ private:
+  PlaneLandmarkObservation obs_;
+};
+
 ceres::LossFunction* MakeLoopClosureLoss(const PoseGraphConfig& config) {
   // Ceres' losses act on s = |r|^2 with scale a: quadratic for s < a^2.
   if (config.loop_closure_loss == "huber")
@@ -197,7 +229,8 @@ struct BuiltProblem {
   std::size_t num_fixed = 0;
 };
 
-BuiltProblem BuildProblem(const PoseGraph& graph, const PoseGraphConfig& config) {
+BuiltProblem BuildProblem(const PoseGraph& graph, const PoseGraphConfig& config,
+                          std::vector<PlaneLandmark>* planes = nullptr) {
   BuiltProblem built;
   const auto& nodes = graph.nodes();
   built.positions.resize(nodes.size());
@@ -225,6 +258,23 @@ BuiltProblem BuildProblem(const PoseGraph& graph, const PoseGraphConfig& config)
                              built.rotations[a].coeffs().data(), built.positions[b].data(),
                              built.rotations[b].coeffs().data());
   }
+  if (planes) {
+    for (PlaneLandmark& plane : *planes) {
+      plane.normal.normalize();
+      int used = 0;
+      for (const PlaneLandmarkObservation& obs : plane.observations) {
+        const auto it = index.find(obs.node);
+        if (it == index.end()) continue;
+        const std::size_t a = it->second;
+        problem.AddResidualBlock(PlaneObservationError::Create(obs), loop_loss,
+                                 built.positions[a].data(), built.rotations[a].coeffs().data(),
+                                 plane.normal.data(), &plane.d);
+        loss_used |= loop_loss != nullptr;
+        ++used;
+      }
+      if (used > 0) problem.SetManifold(plane.normal.data(), new ceres::SphereManifold<3>);
+    }
+  }
   if (!loss_used) delete loop_loss;
 
   for (std::size_t i = 0; i < nodes.size(); ++i) {
@@ -251,13 +301,16 @@ BuiltProblem BuildProblem(const PoseGraph& graph, const PoseGraphConfig& config)
 
 }  // namespace
 
-PoseGraphResult OptimizePoseGraph(PoseGraph& graph, const PoseGraphConfig& config) {
+PoseGraphResult OptimizePoseGraph(PoseGraph& graph, const PoseGraphConfig& config,
+                                  std::vector<PlaneLandmark>* planes) {
   const auto problems = config.Validate();
   PLANESLAM_CHECK(problems.empty(), "invalid PoseGraphConfig: " << problems.front());
   PoseGraphResult result;
   result.num_nodes = graph.nodes().size();
   result.num_edges = graph.edges().size();
-  BuiltProblem built = BuildProblem(graph, config);
+  // Landmarks are optimised in a copy, written back only with a usable solution.
+  std::vector<PlaneLandmark> landmarks = planes ? *planes : std::vector<PlaneLandmark>();
+  BuiltProblem built = BuildProblem(graph, config, planes ? &landmarks : nullptr);
   result.num_fixed = built.num_fixed;
   if (graph.edges().empty()) {
     result.converged = true;
@@ -298,6 +351,7 @@ PoseGraphResult OptimizePoseGraph(PoseGraph& graph, const PoseGraphConfig& confi
       nodes[i].position = built.positions[i];
       nodes[i].rotation = built.rotations[i].normalized();
     }
+    if (planes) *planes = std::move(landmarks);
   }
   return result;
 }

@@ -246,9 +246,55 @@ int SlamSystem::SearchLoopClosures(const Keyframe& current) {
   return added;
 }
 
+std::vector<PlaneLandmark> SlamSystem::PlaneLandmarks() const {
+  std::vector<PlaneLandmark> landmarks;
+  if (!config_.plane_landmarks) return landmarks;
+  for (const MapPlane& plane : map_.planes()) {
+    PlaneLandmark landmark;
+    landmark.normal = plane.normal;
+    landmark.d = plane.d;
+    std::vector<std::int64_t> seen_from;
+    for (const PlaneObservation& obs : plane.observations) {
+      if (obs.keyframe_id < 0 || obs.keyframe_id >= static_cast<std::int64_t>(keyframes_.size())) {
+        continue;
+      }
+      const Keyframe& keyframe = keyframes_[static_cast<std::size_t>(obs.keyframe_id)];
+      const int k = obs.detection_id - 1;
+      if (k < 0 || k >= static_cast<int>(keyframe.planes.size())) continue;
+      const detection::Plane& detected = keyframe.planes[static_cast<std::size_t>(k)];
+      // Only detections that agree with the map plane at the current poses (landmark_gate_*):
+      // the map's own association is looser.
+      const Pose T_world_keyframe = KeyframePose(keyframe.id);
+      const Eigen::Vector3d n_predicted = T_world_keyframe.linear().transpose() * plane.normal;
+      const double d_predicted = plane.d - plane.normal.dot(T_world_keyframe.translation());
+      if (n_predicted.dot(detected.normal) < std::cos(config_.landmark_gate_deg * kDegToRad) ||
+          std::abs(d_predicted - detected.d) > config_.landmark_gate_offset) {
+        continue;
+      }
+      PlaneLandmarkObservation o;
+      o.node = keyframe.id;
+      o.normal = detected.normal;
+      o.d = detected.d;
+      const Eigen::Matrix4d& cov = detected.covariance;
+      o.normal_sigma =
+          std::sqrt(std::max(0.5 * cov.topLeftCorner<3, 3>().trace(),
+                             config_.landmark_normal_sigma * config_.landmark_normal_sigma));
+      o.offset_sigma = std::sqrt(
+          std::max(cov(3, 3), config_.landmark_offset_sigma * config_.landmark_offset_sigma));
+      landmark.observations.push_back(o);
+      seen_from.push_back(keyframe.id);
+    }
+    std::sort(seen_from.begin(), seen_from.end());
+    if (std::unique(seen_from.begin(), seen_from.end()) - seen_from.begin() < 2) continue;
+    landmarks.push_back(std::move(landmark));
+  }
+  return landmarks;
+}
+
 void SlamSystem::Optimize() {
   const auto start = std::chrono::steady_clock::now();
-  OptimizePoseGraph(graph_, pose_graph_config_);
+  std::vector<PlaneLandmark> landmarks = PlaneLandmarks();
+  OptimizePoseGraph(graph_, pose_graph_config_, &landmarks);
   map_.Refit(KeyframePoses());
   ++stats_.optimizations;
   stats_.time_optimize_ms += ElapsedMs(start);
@@ -258,7 +304,8 @@ PoseGraphResult SlamSystem::Finish() {
   const auto start = std::chrono::steady_clock::now();
   PoseGraphResult result;
   if (!graph_.edges().empty()) {
-    result = OptimizePoseGraph(graph_, pose_graph_config_);
+    std::vector<PlaneLandmark> landmarks = PlaneLandmarks();
+    result = OptimizePoseGraph(graph_, pose_graph_config_, &landmarks);
     map_.Refit(KeyframePoses());
     ++stats_.optimizations;
   }

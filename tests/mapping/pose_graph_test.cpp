@@ -107,6 +107,53 @@ TEST(PoseGraph, LoopClosureRecoversTruthBetterThanDeadReckoning) {
   for (const auto& node : loop.graph.nodes()) EXPECT_NEAR(node.rotation.norm(), 1.0, 1e-12);
 }
 
+TEST(PoseGraph, PlaneLandmarksPullAPoseOntoThePlanesItSees) {
+  // Node 1 is 1 m ahead of the fixed node 0, turned 10 deg; the odometry edge between them is
+  // 5 cm and 1 deg off and weak (5 cm / 0.05 rad). Both nodes see three walls exactly (sigma 1 mm,
+  // 1 mrad): with the walls as landmarks the optimum is the true pose.
+  const Pose truth0 = Pose::Identity();
+  const Pose truth1 = MakePose({1.0, 0.0, 0.0}, {0.0, 0.0, 10.0 * M_PI / 180.0});
+  const Pose odometry_error = MakePose({0.0, 0.05, 0.0}, {0.0, 0.0, 1.0 * M_PI / 180.0});
+  const Pose measured = truth0.inverse() * truth1 * odometry_error;
+  PoseGraph graph;
+  graph.AddNode(0, truth0, /*fixed=*/true);
+  graph.AddNode(1, truth0 * measured);
+  graph.AddEdge(0, 1, measured, DiagonalInformation(0.05, 0.05), EdgeKind::kOdometry);
+  const std::vector<std::pair<Eigen::Vector3d, double>> walls = {{Eigen::Vector3d(1, 0, 0), 4.0},
+                                                                 {Eigen::Vector3d(0, 1, 0), 2.0},
+                                                                 {Eigen::Vector3d(0, 0, -1), 1.2}};
+  std::vector<PlaneLandmark> planes;
+  for (const auto& [n, d] : walls) {
+    PlaneLandmark plane;
+    plane.normal = (n + Eigen::Vector3d(0.01, -0.01, 0.005)).normalized();  // initial guess
+    plane.d = d + 0.01;
+    for (const auto& [id, T] : {std::make_pair(0, truth0), std::make_pair(1, truth1)}) {
+      PlaneLandmarkObservation obs;
+      obs.node = id;
+      obs.normal = T.linear().transpose() * n;
+      obs.d = d - n.dot(T.translation());
+      obs.normal_sigma = 1e-3;
+      obs.offset_sigma = 1e-3;
+      plane.observations.push_back(obs);
+    }
+    planes.push_back(plane);
+  }
+  PoseGraph without = graph;
+  OptimizePoseGraph(without);
+  EXPECT_GT((without.node(1).position - truth1.translation()).norm(), 0.04);
+
+  const PoseGraphResult result = OptimizePoseGraph(graph, PoseGraphConfig(), &planes);
+  EXPECT_TRUE(result.converged) << result.message;
+  const Pose T1 = graph.node(1).T_world_node();
+  EXPECT_LT((T1.translation() - truth1.translation()).norm(), 1e-3);
+  EXPECT_LT(Eigen::AngleAxisd(T1.linear() * truth1.linear().transpose()).angle(), 1e-4);
+  for (std::size_t k = 0; k < walls.size(); ++k) {
+    EXPECT_NEAR(planes[k].normal.norm(), 1.0, 1e-12);
+    EXPECT_LT((planes[k].normal - walls[k].first).norm(), 1e-4) << "plane " << k;
+    EXPECT_NEAR(planes[k].d, walls[k].second, 1e-4) << "plane " << k;
+  }
+}
+
 TEST(PoseGraph, ExactGraphHasZeroCostAndStays) {
   const auto truth = LoopTruth(12);
   PoseGraph graph;

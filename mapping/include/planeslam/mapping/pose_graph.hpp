@@ -124,10 +124,31 @@ struct PoseGraphResult {
   std::size_t num_fixed = 0;  ///< nodes held constant (the FIX ones, else the first node)
 };
 
+/// One node's measurement of a plane landmark: the plane n.x = d in the node's frame.
+struct PlaneLandmarkObservation {
+  std::int64_t node = 0;
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  ///< unit, node frame
+  double d = 0.0;                                     ///< [m]
+  double normal_sigma = 0.01;                         ///< [rad] per tangent direction
+  double offset_sigma = 0.01;                         ///< [m]
+};
+
+/// A plane of the world seen from several nodes; optimised together with the poses.
+struct PlaneLandmark {
+  Eigen::Vector3d normal =
+      Eigen::Vector3d::UnitZ();  ///< unit, world frame (initial value / result)
+  double d = 0.0;                ///< [m]
+  std::vector<PlaneLandmarkObservation> observations;
+};
+
 /// Optimises the poses of `graph` in place. Nodes flagged `fixed` are held constant; when none is,
 /// the first node is (removes the gauge freedom). Quaternions are normalised before optimising and
 /// written back normalised. Throws CheckError when `config` is invalid. Prints nothing.
-PoseGraphResult OptimizePoseGraph(PoseGraph& graph, const PoseGraphConfig& config = {});
+/// With `planes`, each landmark's observations add residuals (predicted minus measured normal and
+/// offset in the node's frame, whitened by their sigmas, under the loop-closure loss) and the
+/// landmarks are optimised too (written back); observations of unknown nodes are ignored.
+PoseGraphResult OptimizePoseGraph(PoseGraph& graph, const PoseGraphConfig& config = {},
+                                  std::vector<PlaneLandmark>* planes = nullptr);
 
 /// 0.5 sum rho(|r|^2) of the graph as it is (same cost as the optimiser's).
 double PoseGraphCost(const PoseGraph& graph, const PoseGraphConfig& config = {});
