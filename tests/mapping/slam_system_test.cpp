@@ -1,6 +1,7 @@
-// SlamSystem in process on the first 60 frames of the synthetic room (noise on): the large map
+// SlamSystem in process. On the first 60 frames of the synthetic room (noise on): the large map
 // planes are the scene's planes (normal within 1 deg, offset within 3 cm), none is mapped twice,
-// and each one's polygon covers the part of its scene plane the frames saw.
+// and each one's polygon covers the part of its scene plane the frames saw. On hand-made planes:
+// when a frame renews its keyframe.
 #include "planeslam/mapping/slam_system.hpp"
 
 #include <gtest/gtest.h>
@@ -16,6 +17,7 @@
 #include "mapping/covered_cells.hpp"
 #include "planeslam/datasets/synthetic_sequence.hpp"
 #include "planeslam/detection/grid_region_growing.hpp"
+#include "registration/registration_test_util.hpp"
 
 namespace planeslam::mapping {
 namespace {
@@ -104,6 +106,36 @@ TEST(SlamSystem, SyntheticRoomLargeMapPlanesAreScenePlanesOnceWithTheirVisibleAr
   }
   EXPECT_GE(large, 3);
   for (const auto& [id, count] : mapped) EXPECT_EQ(count, 1) << "scene plane " << id;
+}
+
+TEST(SlamSystem, FrameWhosePlanesAllMatchKeepsItsKeyframe) {
+  // Two walls only (normals x and z), seen from a camera sliding along y by 1 cm per frame: every
+  // frame matches 2 planes, fewer than keyframe_min_matches (4), but has no plane its keyframe
+  // lacks, so it stays with the first keyframe. A third plane then renews the keyframe.
+  SlamSystem slam(SlamConfig{}, {}, {}, {}, {}, {});
+  const datasets::OrganizedCloud cloud(8, 8);  // no points: tracking needs only the planes
+  auto frame = [](bool with_floor, double y) {
+    detection::Segmentation s;
+    s.width = 8;
+    s.height = 8;
+    s.labels.assign(64, -1);
+    s.planes = {registration::test::MakePlane(Eigen::Vector3d::UnitX(), 3.0),
+                registration::test::MakePlane(Eigen::Vector3d::UnitZ(), 2.0)};
+    if (with_floor) {
+      s.planes.push_back(registration::test::MakePlane(Eigen::Vector3d::UnitY(), 1.5 - y));
+    }
+    for (std::size_t k = 0; k < s.planes.size(); ++k) s.planes[k].id = static_cast<int>(k) + 1;
+    return s;
+  };
+  for (int i = 0; i < 10; ++i) {
+    const SlamFrameResult r = slam.ProcessFrame(i / 30.0, cloud, frame(false, 0.01 * i));
+    EXPECT_EQ(r.keyframe, i == 0) << "frame " << i;
+    if (i > 0) EXPECT_EQ(r.matches, 2) << "frame " << i;
+  }
+  EXPECT_EQ(slam.stats().keyframes, 1u);
+  const SlamFrameResult r = slam.ProcessFrame(10 / 30.0, cloud, frame(true, 0.1));
+  EXPECT_TRUE(r.keyframe);
+  EXPECT_EQ(slam.stats().keyframes, 2u);
 }
 
 }  // namespace
