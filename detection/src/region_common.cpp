@@ -100,9 +100,8 @@ RayPlane SolveRegion(const RaySums& sums, const MomentSums& region) {
 /// the other's plane, a box's edge) the farther. Where the regions are neither (planes crossing),
 /// the nearer along the ray to the measured point wins. The planes come from all the regions'
 /// pixels, so where their crease runs is known far better than from any one pixel's depth.
-bool VisibleHere(const Eigen::Vector3f& p, bool spherical, const RayPlane& own,
-                 const RayPlane& other, const DetectionParams& params) {
-  const double s = PointDepth(p, spherical);
+bool VisibleHere(const Eigen::Vector3f& p, double s, const RayPlane& own, const RayPlane& other,
+                 const DetectionParams& params) {
   const Eigen::Vector3d pd = p.cast<double>();
   const double np_own = own.normal.dot(pd), np_other = other.normal.dot(pd);
   if (!(np_other > 0.0) || !(np_own > 0.0)) return false;
@@ -181,15 +180,17 @@ std::vector<RayPlane> FitAlongRays(const datasets::OrganizedCloud& cloud,
   // Pixel i's region after this pass (its own when it stays).
   auto competitor = [&](std::size_t i) -> std::int32_t {
     const std::int32_t r = labels[i];
+    if (r < 0 || !planes[r].ok) return r;
     // A point behind the sensor (possible in a PCD) never entered the ray sums: it stays.
-    if (r < 0 || !planes[r].ok || !(PointDepth(cloud.points[i], spherical) > 0.0f)) return r;
+    const double s = PointDepth(cloud.points[i], spherical);
+    if (!(s > 0.0)) return r;
     const int x = static_cast<int>(i % width), y = static_cast<int>(i / width);
     const std::int32_t around[4] = {x > 0 ? labels[i - 1] : -1, x + 1 < width ? labels[i + 1] : -1,
                                     y > 0 ? labels[i - width] : -1,
                                     y + 1 < height ? labels[i + width] : -1};
     for (const std::int32_t other : around) {
       if (other < 0 || other == r || !planes[other].ok) continue;
-      if (VisibleHere(cloud.points[i], spherical, planes[r], planes[other], params)) return other;
+      if (VisibleHere(cloud.points[i], s, planes[r], planes[other], params)) return other;
     }
     return r;
   };

@@ -183,7 +183,9 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
     result.loop_closures = SearchLoopClosures(current);
     stats_.time_loop_ms += ElapsedMs(loop_start);
     if (result.loop_closures > 0) {
+      const auto optimize_start = std::chrono::steady_clock::now();
       Optimize();
+      stats_.time_optimize_ms += ElapsedMs(optimize_start);
       result.T_world_sensor = KeyframePose(current.id);
     }
   }
@@ -249,11 +251,11 @@ int SlamSystem::SearchLoopClosures(const Keyframe& current) {
 std::vector<PlaneLandmark> SlamSystem::PlaneLandmarks() const {
   std::vector<PlaneLandmark> landmarks;
   if (!config_.plane_landmarks) return landmarks;
+  const double cos_gate = std::cos(config_.landmark_gate_deg * kDegToRad);
   for (const MapPlane& plane : map_.planes()) {
     PlaneLandmark landmark;
     landmark.normal = plane.normal;
     landmark.d = plane.d;
-    std::vector<std::int64_t> seen_from;
     for (const PlaneObservation& obs : plane.observations) {
       if (obs.keyframe_id < 0 || obs.keyframe_id >= static_cast<std::int64_t>(keyframes_.size())) {
         continue;
@@ -267,7 +269,7 @@ std::vector<PlaneLandmark> SlamSystem::PlaneLandmarks() const {
       const Pose T_world_keyframe = KeyframePose(keyframe.id);
       const Eigen::Vector3d n_predicted = T_world_keyframe.linear().transpose() * plane.normal;
       const double d_predicted = plane.d - plane.normal.dot(T_world_keyframe.translation());
-      if (n_predicted.dot(detected.normal) < std::cos(config_.landmark_gate_deg * kDegToRad) ||
+      if (n_predicted.dot(detected.normal) < cos_gate ||
           std::abs(d_predicted - detected.d) > config_.landmark_gate_offset) {
         continue;
       }
@@ -282,33 +284,27 @@ std::vector<PlaneLandmark> SlamSystem::PlaneLandmarks() const {
       o.offset_sigma = std::sqrt(
           std::max(cov(3, 3), config_.landmark_offset_sigma * config_.landmark_offset_sigma));
       landmark.observations.push_back(o);
-      seen_from.push_back(keyframe.id);
     }
-    std::sort(seen_from.begin(), seen_from.end());
-    if (std::unique(seen_from.begin(), seen_from.end()) - seen_from.begin() < 2) continue;
-    landmarks.push_back(std::move(landmark));
+    const auto& seen = landmark.observations;
+    const bool two_keyframes = std::any_of(
+        seen.begin(), seen.end(), [&](const auto& o) { return o.node != seen.front().node; });
+    if (two_keyframes) landmarks.push_back(std::move(landmark));
   }
   return landmarks;
 }
 
-void SlamSystem::Optimize() {
-  const auto start = std::chrono::steady_clock::now();
+PoseGraphResult SlamSystem::Optimize() {
   std::vector<PlaneLandmark> landmarks = PlaneLandmarks();
-  OptimizePoseGraph(graph_, pose_graph_config_, &landmarks);
+  const PoseGraphResult result = OptimizePoseGraph(graph_, pose_graph_config_, &landmarks);
   map_.Refit(KeyframePoses());
   ++stats_.optimizations;
-  stats_.time_optimize_ms += ElapsedMs(start);
+  return result;
 }
 
 PoseGraphResult SlamSystem::Finish() {
   const auto start = std::chrono::steady_clock::now();
   PoseGraphResult result;
-  if (!graph_.edges().empty()) {
-    std::vector<PlaneLandmark> landmarks = PlaneLandmarks();
-    result = OptimizePoseGraph(graph_, pose_graph_config_, &landmarks);
-    map_.Refit(KeyframePoses());
-    ++stats_.optimizations;
-  }
+  if (!graph_.edges().empty()) result = Optimize();
   map_.MergeCoincidentPlanes();
   stats_.time_optimize_ms += ElapsedMs(start);
   return result;

@@ -130,7 +130,9 @@ TEST(SlamSystem, FrameWhosePlanesAllMatchKeepsItsKeyframe) {
   for (int i = 0; i < 10; ++i) {
     const SlamFrameResult r = slam.ProcessFrame(i / 30.0, cloud, frame(false, 0.01 * i));
     EXPECT_EQ(r.keyframe, i == 0) << "frame " << i;
-    if (i > 0) EXPECT_EQ(r.matches, 2) << "frame " << i;
+    if (i > 0) {
+      EXPECT_EQ(r.matches, 2) << "frame " << i;
+    }
   }
   EXPECT_EQ(slam.stats().keyframes, 1u);
   const SlamFrameResult r = slam.ProcessFrame(10 / 30.0, cloud, frame(true, 0.1));

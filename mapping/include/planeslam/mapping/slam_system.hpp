@@ -182,7 +182,8 @@ class SlamSystem {
                    const detection::Segmentation& segmentation,
                    const datasets::OrganizedCloud& cloud);
   int SearchLoopClosures(const Keyframe& current);
-  void Optimize();
+  /// Pose graph with the plane landmarks, then the map re-fitted to the new poses.
+  PoseGraphResult Optimize();
   /// The map planes seen from two or more keyframes, with those keyframes' detections of them.
   std::vector<PlaneLandmark> PlaneLandmarks() const;
 
