@@ -41,6 +41,9 @@ void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
           "[deg] a detection joins its map plane's landmark only within this angle", 0.0, 90.0);
   v.Field("landmark_gate_offset", c.landmark_gate_offset,
           "[m] and within this offset (at the current poses)", 0.0, 10.0);
+  v.Field("interpolate_frames", c.interpolate_frames,
+          "frames between keyframes take their share of the correction of the edge between "
+          "those keyframes (output trajectory)");
   v.Field("loop_closure", c.loop_closure, "search and verify loop closures");
   v.Field("loop_search_radius", c.loop_search_radius,
           "[m] loop candidates are keyframes within this distance", 0.0, 1000.0);

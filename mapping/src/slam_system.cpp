@@ -117,8 +117,11 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
   registration::MotionPrior prior;
   const double dt = timestamp - frames_.back().timestamp;
   prior.T_prev_curr = T_keyframe_last_ * velocity_.Predict(dt);  // constant velocity
-  prior.covariance =
-      DiagonalCovariance(config_.prior_translation_sigma, config_.prior_rotation_sigma);
+  // The prediction is uncertain by the last frame's own uncertainty relative to the keyframe
+  // plus one frame's change of velocity: in directions the planes have left open since the
+  // keyframe the prior's error accumulates frame after frame, and the odometry edge must say so.
+  prior.covariance = covariance_keyframe_last_ + DiagonalCovariance(config_.prior_translation_sigma,
+                                                                    config_.prior_rotation_sigma);
   const registration::AssociationResult association = registration::AssociatePlanes(
       keyframe.planes, segmentation.planes, prior, association_config_, registration_config_);
   registration::RegistrationResult reg = association.registration;
@@ -158,6 +161,7 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
     velocity_.Add(timestamp, dt, T_keyframe_last_.inverse() * T_keyframe_curr);
   }
   T_keyframe_last_ = T_keyframe_curr;
+  covariance_keyframe_last_ = covariance;
   result.T_world_sensor = KeyframePose(keyframe.id) * T_keyframe_curr;
 
   const bool moved = T_keyframe_curr.translation().norm() > config_.keyframe_translation ||
@@ -171,11 +175,13 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
   // New keyframe: node, odometry edge weighted by the registration's uncertainty, map planes.
   const std::int64_t previous_id = keyframe.id;
   AddKeyframe(result.index, result.T_world_sensor, segmentation, cloud);
+  keyframes_.back().T_previous_keyframe = T_keyframe_curr;
   const Keyframe& current = keyframes_.back();
   graph_.AddEdge(previous_id, current.id, T_keyframe_curr, InformationFromCovariance(covariance),
                  EdgeKind::kOdometry);
   frames_.push_back({timestamp, current.id, Pose::Identity()});
   T_keyframe_last_ = Pose::Identity();
+  covariance_keyframe_last_.setZero();
   result.keyframe = true;
 
   if (config_.loop_closure) {
@@ -312,8 +318,26 @@ PoseGraphResult SlamSystem::Finish() {
 
 datasets::Trajectory SlamSystem::EstimatedTrajectory() const {
   datasets::Trajectory trajectory;
-  for (const FrameRecord& record : frames_) {
-    trajectory.Add(record.timestamp, KeyframePose(record.keyframe_id) * record.T_keyframe_frame);
+  for (std::size_t f = 0; f < frames_.size(); ++f) {
+    const FrameRecord& record = frames_[f];
+    const Pose T_world_keyframe = KeyframePose(record.keyframe_id);
+    const std::size_t next_id = static_cast<std::size_t>(record.keyframe_id) + 1;
+    if (!config_.interpolate_frames || next_id >= keyframes_.size()) {
+      trajectory.Add(record.timestamp, T_world_keyframe * record.T_keyframe_frame);
+      continue;
+    }
+    // The optimiser corrects the odometry edge to the next keyframe as a whole:
+    // T_keyframe_next = correction * measured. The frames between the two were tracked against
+    // this keyframe and drifted along the way, so each takes the share of the correction that
+    // matches how far along it is (a keyframe's own frame takes none, the next keyframe all).
+    const Keyframe& next = keyframes_[next_id];
+    const std::size_t first = keyframes_[static_cast<std::size_t>(record.keyframe_id)].frame;
+    const double alpha = static_cast<double>(f - first) / static_cast<double>(next.frame - first);
+    const Pose correction =
+        T_world_keyframe.inverse() * KeyframePose(next.id) * next.T_previous_keyframe.inverse();
+    const Pose share = registration::BoxPlus(
+        Pose::Identity(), alpha * registration::BoxMinus(correction, Pose::Identity()));
+    trajectory.Add(record.timestamp, T_world_keyframe * share * record.T_keyframe_frame);
   }
   return trajectory;
 }

@@ -87,6 +87,10 @@ struct SlamConfig {
   /// the room gave 2.17 cm, with 1 deg / 1.5 cm 2.00 cm.
   double landmark_gate_deg = 1.0;
   double landmark_gate_offset = 0.015;
+  /// Frames between two keyframes take their share of the optimiser's correction of the
+  /// odometry edge between them in the output trajectory (else they follow their keyframe
+  /// rigidly, and the whole correction shows as a jump at the next keyframe).
+  bool interpolate_frames = true;
   bool loop_closure = true;          ///< search and verify loop closures
   double loop_search_radius = 1.5;   ///< [m] candidate keyframes within this distance
   double loop_max_angle_deg = 60.0;  ///< [deg] and viewing directions within this angle
@@ -170,6 +174,8 @@ class SlamSystem {
     std::int64_t id = 0;
     std::size_t frame = 0;
     std::vector<detection::Plane> planes;
+    /// Measured pose in the previous keyframe (its odometry edge; identity for the first).
+    Pose T_previous_keyframe = Pose::Identity();
   };
   struct FrameRecord {
     double timestamp = 0.0;
@@ -204,6 +210,7 @@ class SlamSystem {
   Pose T_world_first_ = Pose::Identity();
   registration::VelocityModel velocity_;  ///< of the well-determined frames
   Pose T_keyframe_last_ = Pose::Identity();
+  Matrix6d covariance_keyframe_last_ = Matrix6d::Zero();  ///< of T_keyframe_last_
   int consecutive_refusals_ = 0;
   SlamStats stats_;
 };
