@@ -146,14 +146,21 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     if (s.k < mu) continue;  // sparse
     double scatter[6];
     s.Scatter(scatter);
-    const SymEigen3 e = SymEigen3Smallest(scatter);
+    SymEigen3 e;
+    SymEigenvaluesAscending(scatter, e.l1, e.l2, e.l3);
     if (e.l2 <= grid_.alpha * e.l3) {
       ws.classes[c] = CellClass::kLinear;
       continue;
     }
-    const Eigen::Vector3d m = s.Centroid();
+    // The eigenvector only where it is read: the noise along the normal of a grid whose normal
+    // is pure noise (tilt >= 1, most grids beyond 2-3 m) is its isotropic noise, and such a
+    // grid gets no angle test either (see below).
+    const double tilt = s.NormalTilt(e.l2);
+    const bool have_normal = !depth_model || tilt < 1.0;
+    if (have_normal) SmallestEigenvector(scatter, e);
     const double mse = e.l1 / s.k;
-    const double noise_mse = s.EffectiveMse(e.v1, s.NormalTilt(e.l2));  // sigma_n,rms^2
+    const double noise_mse =
+        have_normal ? s.EffectiveMse(e.v1, tilt) : s.IsotropicMse();  // sigma_n,rms^2
     bool planar = e.l1 <= grid_.beta * e.l2;
     if (!planar && depth_model) {
       planar = mse <= params_.planar_sigmas * params_.planar_sigmas * noise_mse;
@@ -164,21 +171,28 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     }
     ws.classes[c] = CellClass::kPlanar;
     CellInfo& ci = ws.info[c];
-    ci.n = e.v1;
-    if (ci.n.dot(m) < 0) ci.n = -ci.n;
-    ci.m = m;
+    ci.m = s.Centroid();
     ci.mse = mse;
     if (depth_model) {
       // Normal noise of a small grid: std ~ sigma_n / sqrt(l2) [rad].
       const double ang = eta + params_.eta_sigmas * std::sqrt(noise_mse / std::max(e.l2, 1e-18));
-      ci.cos_tol = ang >= 0.5 * M_PI ? -1.0 : std::cos(ang);
-      ci.sin_tol = ang >= 0.5 * M_PI ? 1.0 : std::sin(ang);
+      if (ang >= 0.5 * M_PI) {
+        ci.n.setZero();  // no angle test: the growth never reads it
+        ci.cos_tol = -1.0;
+        ci.sin_tol = 1.0;
+      } else {
+        if (!have_normal) SmallestEigenvector(scatter, e);
+        ci.n = e.v1.dot(ci.m) < 0 ? Eigen::Vector3d(-e.v1) : e.v1;
+        ci.cos_tol = std::cos(ang);
+        ci.sin_tol = std::sin(ang);
+      }
       // Seed order under the noise model: the paper's minimal MSE, plus the ray noise leaking in
       // through the grid's normal uncertainty, so that grids whose normal is mostly noise (far
       // away, where a fluke can give a tiny MSE with a random normal) seed last.
-      const double tilt = std::min(1.0, s.NormalTilt(e.l2));
-      ws.seeds.push_back(seed_key(mse + s.IsotropicMse() * tilt * tilt, c));
+      const double seed_tilt = std::min(1.0, tilt);
+      ws.seeds.push_back(seed_key(mse + s.IsotropicMse() * seed_tilt * seed_tilt, c));
     } else {
+      ci.n = e.v1.dot(ci.m) < 0 ? Eigen::Vector3d(-e.v1) : e.v1;
       ci.cos_tol = cos_eta;
       ws.seeds.push_back(seed_key(mse, c));  // Algorithm 2 line 4: minimal MSE first
     }

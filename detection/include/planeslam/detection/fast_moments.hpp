@@ -145,6 +145,12 @@ void SymEigenvalues3(const double c[6], double& l1, double& l2, double& l3);
 /// (the best-conditioned pair), and l1 is refined as the Rayleigh quotient v1^T C v1, which is
 /// accurate to round-off even when l1 << l3.
 SymEigen3 SymEigen3Smallest(const double c[6]);
+/// The two halves of SymEigen3Smallest, for callers that need the eigenvector only sometimes
+/// (GBRG's classification): the eigenvalues, ascending (Newton or the closed form, as above)...
+void SymEigenvaluesAscending(const double c[6], double& l1, double& l2, double& l3);
+/// ...and, given them in e, the eigenvector of the smallest (cross product of two rows of
+/// C - l1 I) with l1 refined as its Rayleigh quotient.
+void SmallestEigenvector(const double c[6], SymEigen3& e);
 
 /// Plane fitted to moment sums (eq. 3-6): unit normal oriented so that d = n.m >= 0.
 struct FastFit {
@@ -158,13 +164,13 @@ struct FastFit {
 FastFit FitSums(const MomentSums& m);
 
 /// The same fit, updated from a nearby normal `n0` (the region's plane before the last join):
-/// two steps of inverse iteration with the adjugate of C (adj C = det(C) C^-1, so no division and
-/// no trouble when C is singular, i.e. exactly planar points) converge to the smallest eigenvector
+/// two steps of power iteration on the adjugate of C (adj C = det(C) C^-1, so no division and no
+/// trouble when C is singular, i.e. exactly planar points) converge to the smallest eigenvector
 /// by a factor l1/l2 each; l1 is the Rayleigh quotient and l2, l3 follow from the trace and the
 /// second invariant. Falls back to FitSums when l1 > 0.01 l2 (poorly separated) or n0 is
 /// orthogonal to the answer, so the result equals FitSums to ~1e-4 (l1/l2)^2 relative in the
-/// normal. Costs about 60 flops and one sqrt instead of acos/cos/sin: the per-join refit of both
-/// growers.
+/// normal. Costs about 60 flops and two square roots instead of acos/cos/sin: the per-join
+/// refit of both growers.
 FastFit RefitFrom(const MomentSums& m, const Eigen::Vector3d& n0);
 
 }  // namespace planeslam::detection
