@@ -259,7 +259,6 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       const MomentSums& gs = ws.sums[g];
       const Eigen::Vector3d diff = fit.centroid - ci.m;
       const double off = std::abs(fit.normal.dot(diff));
-      double gamma;
       if (depth_model) {
         // A young region's own normal is uncertain (tilt, 2 sigma): widen the angle test by it
         // and let the coplanarity test allow tilt x lateral distance, so that a seed with a
@@ -271,20 +270,29 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
           if (ci.cos_tol >= 0 && cos_ang > 0 && dot <= cos_ang) continue;
         } else if (dot <= ci.cos_tol)
           continue;
-        const double lateral = std::sqrt(std::max(0.0, diff.squaredNorm() - off * off));
-        // Noise of the grid's centre along the region normal: sigma_n / sqrt(K_g).
-        gamma = params_.Gamma(std::sqrt(gs.EffectiveMse(fit.normal, tilt) / gs.k)) + tilt * lateral;
+        // The bound below is at least the base gamma, which admits most grids of a plane: only
+        // the others pay for its square roots.
+        if (off >= params_.gamma) {
+          const double lateral = std::sqrt(std::max(0.0, diff.squaredNorm() - off * off));
+          // Noise of the grid's centre along the region normal: sigma_n / sqrt(K_g).
+          const double gamma =
+              params_.Gamma(std::sqrt(gs.EffectiveMse(fit.normal, tilt) / gs.k)) + tilt * lateral;
+          if (off >= gamma) continue;
+        }
       } else {
         if (std::abs(fit.normal.dot(ci.n)) <= ci.cos_tol) continue;
-        gamma = params_.gamma;
+        if (off >= params_.gamma) continue;
       }
-      if (off >= gamma) continue;
       MomentSums merged = region;
       merged.Merge(gs);
       const FastFit merged_fit = RefitFrom(merged, fit.normal);
       const double merged_tilt = merged.NormalTilt(merged_fit.l2);
-      const double expected = merged.EffectiveMse(merged_fit.normal, merged_tilt);
-      if (merged_fit.mse >= params_.Epsilon(expected, merged.k)) continue;
+      // The noise along the normal alone is a lower bound of the effective noise (its tilt term
+      // only adds), so a merged MSE within its epsilon passes without the rest.
+      if (merged_fit.mse >= params_.Epsilon(merged.ExpectedMse(merged_fit.normal), merged.k)) {
+        const double expected = merged.EffectiveMse(merged_fit.normal, merged_tilt);
+        if (merged_fit.mse >= params_.Epsilon(expected, merged.k)) continue;
+      }
       region = merged;
       fit = merged_fit;  // eq. (5): plane parameters updated on every join
       if (depth_model) update_tilt(merged_tilt);

@@ -189,11 +189,15 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
         const bool exact = refit_interval == 1;
         if (!exact) {
           // Approximate distance test against the current plane; MSE bound about its normal.
+          // Each bound is at least its cheap part (the base gamma; epsilon of the noise along
+          // the normal alone, which the tilt term only raises): within that, no roots needed.
           const double dist = std::abs(fit.normal.dot(pc) - fit.d);
-          if (dist >= gamma_for(fit, region)) continue;
-          const double eps =
-              params_.Epsilon(merged.EffectiveMse(fit.normal, merged.NormalTilt(fit.l2)), merged.k);
-          if (MseAbout(merged, fit.normal) < eps) {
+          if (dist >= params_.gamma && dist >= gamma_for(fit, region)) continue;
+          const double mse_about = MseAbout(merged, fit.normal);
+          if (mse_about < params_.Epsilon(merged.ExpectedMse(fit.normal), merged.k) ||
+              mse_about <
+                  params_.Epsilon(merged.EffectiveMse(fit.normal, merged.NormalTilt(fit.l2)),
+                                  merged.k)) {
             accept = true;
           } else {
             new_fit = RefitFrom(merged, fit.normal);
