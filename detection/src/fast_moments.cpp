@@ -63,7 +63,8 @@ namespace {
 /// quadratically once near it; l2, l3 then solve l2 + l3 = t - l1, l2 l3 = m - l1 (t - l1). Returns
 /// false (use the closed form) when C is not PSD or l1 is too close to l2 to converge in a few
 /// steps.
-bool SymEigenvaluesNewton(const double c[6], double& l1, double& l2, double& l3) {
+bool SymEigenvaluesNewton(const double c[6], double relative_tolerance, double& l1, double& l2,
+                          double& l3) {
   const double t = c[0] + c[3] + c[5];
   const double m00 = c[3] * c[5] - c[4] * c[4], m11 = c[0] * c[5] - c[2] * c[2],
                m22 = c[0] * c[3] - c[1] * c[1];
@@ -79,7 +80,7 @@ bool SymEigenvaluesNewton(const double c[6], double& l1, double& l2, double& l3)
     if (!(dp > 0)) return false;
     const double step = -p / dp;
     l += step;
-    if (std::abs(step) <= 1e-14 * t) {
+    if (std::abs(step) <= relative_tolerance * t) {
       converged = true;
       break;
     }
@@ -186,8 +187,9 @@ bool AdjugatePowerIteration(const double c[6], const double a[6], Eigen::Vector3
 
 }  // namespace
 
-void SymEigenvaluesAscending(const double c[6], double& l1, double& l2, double& l3) {
-  if (!SymEigenvaluesNewton(c, l1, l2, l3)) SymEigenvalues3(c, l1, l2, l3);
+void SymEigenvaluesAscending(const double c[6], double& l1, double& l2, double& l3,
+                             double relative_tolerance) {
+  if (!SymEigenvaluesNewton(c, relative_tolerance, l1, l2, l3)) SymEigenvalues3(c, l1, l2, l3);
 }
 
 SymEigen3 SymEigen3Smallest(const double c[6]) {

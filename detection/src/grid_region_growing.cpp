@@ -147,7 +147,9 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     double scatter[6];
     s.Scatter(scatter);
     SymEigen3 e;
-    SymEigenvaluesAscending(scatter, e.l1, e.l2, e.l3);
+    // A grid's eigenvalues feed thresholds and a float seed key: 1e-9 of the trace is plenty
+    // (a grid whose normal is read refines l1 as its Rayleigh quotient anyway).
+    SymEigenvaluesAscending(scatter, e.l1, e.l2, e.l3, 1e-9);
     if (e.l2 <= grid_.alpha * e.l3) {
       ws.classes[c] = CellClass::kLinear;
       continue;

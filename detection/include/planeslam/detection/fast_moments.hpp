@@ -146,8 +146,10 @@ void SymEigenvalues3(const double c[6], double& l1, double& l2, double& l3);
 /// accurate to round-off even when l1 << l3.
 SymEigen3 SymEigen3Smallest(const double c[6]);
 /// The two halves of SymEigen3Smallest, for callers that need the eigenvector only sometimes
-/// (GBRG's classification): the eigenvalues, ascending (Newton or the closed form, as above)...
-void SymEigenvaluesAscending(const double c[6], double& l1, double& l2, double& l3);
+/// (GBRG's classification): the eigenvalues, ascending (Newton or the closed form, as above;
+/// Newton stops at a step below relative_tolerance times the trace)...
+void SymEigenvaluesAscending(const double c[6], double& l1, double& l2, double& l3,
+                             double relative_tolerance = 1e-14);
 /// ...and, given them in e, the eigenvector of the smallest (cross product of two rows of
 /// C - l1 I) with l1 refined as its Rayleigh quotient.
 void SmallestEigenvector(const double c[6], SymEigen3& e);
