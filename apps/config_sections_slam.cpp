@@ -21,6 +21,9 @@ void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
   v.Field("prior_gate_chi2", c.prior_gate_chi2,
           "[-] refuse a tracking result this far (chi-square, 6 dof) from the prior; 0 = off", 0.0,
           1e12);
+  v.Field("gate_translation_sigma", c.gate_translation_sigma,
+          "[m] the gate's plausible change of velocity per frame (1-sigma)", 1e-6, 100.0);
+  v.Field("gate_rotation_sigma", c.gate_rotation_sigma, "[rad] same for rotation", 1e-6, 10.0);
   v.Field("prior_gate_max_refusals", c.prior_gate_max_refusals,
           "[frames] accept the result anyway after this many refusals in a row", 0, 1000000);
   v.Field("hold_velocity_when_degenerate", c.hold_velocity_when_degenerate,

@@ -49,6 +49,9 @@ std::vector<std::string> SlamConfig::Validate() const {
   if (!(prior_translation_sigma > 0) || !(prior_rotation_sigma > 0)) {
     problems.push_back("prior sigmas must be > 0");
   }
+  if (!(gate_translation_sigma > 0) || !(gate_rotation_sigma > 0)) {
+    problems.push_back("gate sigmas must be > 0");
+  }
   if (!(loop_prior_translation_sigma > 0) || !(loop_prior_rotation_sigma > 0)) {
     problems.push_back("loop prior sigmas must be > 0");
   }
@@ -134,8 +137,13 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
   result.degenerate = reg.degenerate || !reg.converged;
   if (result.used_point_to_plane) ++stats_.point_to_plane_frames;
   if (reg.converged && config_.prior_gate_chi2 > 0) {
-    // Innovation of the result against the constant-velocity prediction.
-    const double chi2 = registration::PriorInnovationChi2(reg, prior);
+    // Innovation of the result against the constant-velocity prediction, under the change of
+    // velocity that is plausible in one frame (gate_*_sigma), not the association's loose prior.
+    registration::MotionPrior gate_prior = prior;
+    gate_prior.covariance =
+        covariance_keyframe_last_ +
+        DiagonalCovariance(config_.gate_translation_sigma, config_.gate_rotation_sigma);
+    const double chi2 = registration::PriorInnovationChi2(reg, gate_prior);
     if (!(chi2 <= config_.prior_gate_chi2) &&
         consecutive_refusals_ < config_.prior_gate_max_refusals) {
       result.refused = true;

@@ -1,7 +1,8 @@
 // SlamSystem in process. On the first 60 frames of the synthetic room (noise on): the large map
 // planes are the scene's planes (normal within 1 deg, offset within 3 cm), none is mapped twice,
 // and each one's polygon covers the part of its scene plane the frames saw. On hand-made planes:
-// when a frame renews its keyframe, and how frames between keyframes follow the optimised graph.
+// when a frame renews its keyframe, when a result is refused against the motion prior, and how
+// frames between keyframes follow the optimised graph.
 #include "planeslam/mapping/slam_system.hpp"
 
 #include <gtest/gtest.h>
@@ -138,6 +139,47 @@ TEST(SlamSystem, FrameWhosePlanesAllMatchKeepsItsKeyframe) {
   const SlamFrameResult r = slam.ProcessFrame(10 / 30.0, cloud, frame(true, 0.1));
   EXPECT_TRUE(r.keyframe);
   EXPECT_EQ(slam.stats().keyframes, 2u);
+}
+
+TEST(SlamSystem, RollSetByOneSmallPlaneAgainstASmoothMotionIsRefused) {
+  // A still camera sees two walls (normals x and z) and the floor (normal y). Then the z wall
+  // leaves the view, and the floor is detected 3 deg off about the x wall's normal (as a small
+  // sliver mixing in a strip of another surface does): the planes then say the camera rolled 3
+  // deg in one frame, which the prior's plausible change of velocity (0.005 rad) refuses.
+  SlamSystem slam(SlamConfig{}, {}, {}, {}, {}, {});
+  const datasets::OrganizedCloud cloud(8, 8);  // no points: tracking needs only the planes
+  auto frame = [](bool with_z_wall, double floor_roll) {
+    detection::Segmentation s;
+    s.width = 8;
+    s.height = 8;
+    s.labels.assign(64, -1);
+    s.planes = {
+        registration::test::MakePlane(Eigen::Vector3d::UnitX(), 3.0),
+        registration::test::MakePlane(
+            Eigen::AngleAxisd(floor_roll, Eigen::Vector3d::UnitX()) * Eigen::Vector3d::UnitY(),
+            1.5)};
+    if (with_z_wall)
+      s.planes.push_back(registration::test::MakePlane(Eigen::Vector3d::UnitZ(), 2.0));
+    for (std::size_t k = 0; k < s.planes.size(); ++k) s.planes[k].id = static_cast<int>(k) + 1;
+    return s;
+  };
+  for (int i = 0; i < 10; ++i) {
+    EXPECT_FALSE(slam.ProcessFrame(i / 30.0, cloud, frame(true, 0.0)).refused) << "frame " << i;
+  }
+  const SlamFrameResult r = slam.ProcessFrame(10 / 30.0, cloud, frame(false, 3.0 * M_PI / 180.0));
+  EXPECT_TRUE(r.refused);
+  EXPECT_LT(Eigen::AngleAxisd(r.T_world_sensor.linear()).angle(), 1e-3);
+
+  // The association's own prior (0.05 rad) as the gate's would have taken the 3 deg roll.
+  SlamConfig loose;
+  loose.gate_translation_sigma = loose.prior_translation_sigma;
+  loose.gate_rotation_sigma = loose.prior_rotation_sigma;
+  SlamSystem trusting(loose, {}, {}, {}, {}, {});
+  for (int i = 0; i < 10; ++i) trusting.ProcessFrame(i / 30.0, cloud, frame(true, 0.0));
+  const SlamFrameResult t =
+      trusting.ProcessFrame(10 / 30.0, cloud, frame(false, 3.0 * M_PI / 180.0));
+  EXPECT_FALSE(t.refused);
+  EXPECT_NEAR(Eigen::AngleAxisd(t.T_world_sensor.linear()).angle(), 3.0 * M_PI / 180.0, 1e-3);
 }
 
 /// Largest error of the frames' positions along y against the true ones.
