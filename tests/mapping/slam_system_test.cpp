@@ -109,6 +109,18 @@ TEST(SlamSystem, SyntheticRoomLargeMapPlanesAreScenePlanesOnceWithTheirVisibleAr
   for (const auto& [id, count] : mapped) EXPECT_EQ(count, 1) << "scene plane " << id;
 }
 
+/// A frame of hand-made planes (ids 1, 2, ...) over an 8 x 8 image with no labelled pixels:
+/// tracking needs only the planes.
+detection::Segmentation PlanesOnly(std::vector<detection::Plane> planes) {
+  detection::Segmentation s;
+  s.width = 8;
+  s.height = 8;
+  s.labels.assign(64, -1);
+  s.planes = std::move(planes);
+  for (std::size_t k = 0; k < s.planes.size(); ++k) s.planes[k].id = static_cast<int>(k) + 1;
+  return s;
+}
+
 TEST(SlamSystem, FrameWhosePlanesAllMatchKeepsItsKeyframe) {
   // Two walls only (normals x and z), seen from a camera sliding along y by 1 cm per frame: every
   // frame matches 2 planes, fewer than keyframe_min_matches (4), but has no plane its keyframe
@@ -116,17 +128,13 @@ TEST(SlamSystem, FrameWhosePlanesAllMatchKeepsItsKeyframe) {
   SlamSystem slam(SlamConfig{}, {}, {}, {}, {}, {});
   const datasets::OrganizedCloud cloud(8, 8);  // no points: tracking needs only the planes
   auto frame = [](bool with_floor, double y) {
-    detection::Segmentation s;
-    s.width = 8;
-    s.height = 8;
-    s.labels.assign(64, -1);
-    s.planes = {registration::test::MakePlane(Eigen::Vector3d::UnitX(), 3.0),
-                registration::test::MakePlane(Eigen::Vector3d::UnitZ(), 2.0)};
+    std::vector<detection::Plane> planes = {
+        registration::test::MakePlane(Eigen::Vector3d::UnitX(), 3.0),
+        registration::test::MakePlane(Eigen::Vector3d::UnitZ(), 2.0)};
     if (with_floor) {
-      s.planes.push_back(registration::test::MakePlane(Eigen::Vector3d::UnitY(), 1.5 - y));
+      planes.push_back(registration::test::MakePlane(Eigen::Vector3d::UnitY(), 1.5 - y));
     }
-    for (std::size_t k = 0; k < s.planes.size(); ++k) s.planes[k].id = static_cast<int>(k) + 1;
-    return s;
+    return PlanesOnly(std::move(planes));
   };
   for (int i = 0; i < 10; ++i) {
     const SlamFrameResult r = slam.ProcessFrame(i / 30.0, cloud, frame(false, 0.01 * i));
@@ -149,19 +157,13 @@ TEST(SlamSystem, RollSetByOneSmallPlaneAgainstASmoothMotionIsRefused) {
   SlamSystem slam(SlamConfig{}, {}, {}, {}, {}, {});
   const datasets::OrganizedCloud cloud(8, 8);  // no points: tracking needs only the planes
   auto frame = [](bool with_z_wall, double floor_roll) {
-    detection::Segmentation s;
-    s.width = 8;
-    s.height = 8;
-    s.labels.assign(64, -1);
-    s.planes = {
+    std::vector<detection::Plane> planes = {
         registration::test::MakePlane(Eigen::Vector3d::UnitX(), 3.0),
         registration::test::MakePlane(
             Eigen::AngleAxisd(floor_roll, Eigen::Vector3d::UnitX()) * Eigen::Vector3d::UnitY(),
             1.5)};
-    if (with_z_wall)
-      s.planes.push_back(registration::test::MakePlane(Eigen::Vector3d::UnitZ(), 2.0));
-    for (std::size_t k = 0; k < s.planes.size(); ++k) s.planes[k].id = static_cast<int>(k) + 1;
-    return s;
+    if (with_z_wall) planes.push_back(registration::test::MakePlane(Eigen::Vector3d::UnitZ(), 2.0));
+    return PlanesOnly(std::move(planes));
   };
   for (int i = 0; i < 10; ++i) {
     EXPECT_FALSE(slam.ProcessFrame(i / 30.0, cloud, frame(true, 0.0)).refused) << "frame " << i;
