@@ -1,5 +1,5 @@
 // Constant-velocity prediction from recent motions: mean rate over a time window, scaled to the
-// next interval, forgetting what is older than the window.
+// next interval, forgetting what is older than the window; translation and rotation kept apart.
 #include "planeslam/registration/velocity_model.hpp"
 
 #include <gtest/gtest.h>
@@ -54,6 +54,24 @@ TEST(VelocityModel, MotionsOlderThanTheWindowAreForgotten) {
   // The motions ending at 1.1, 1.2 and 1.3 s are within 0.25 s of the latest; the 1 cm ones,
   // which ended at 1.0 s or earlier, are gone.
   EXPECT_NEAR(model.Predict(0.1).translation().x(), 0.03, 1e-12);
+}
+
+TEST(VelocityModel, AnUntrustedPartKeepsItsOwnRateWhileTheOtherFollows) {
+  VelocityModel model(0.25);
+  for (int i = 1; i <= 10; ++i) model.Add(0.1 * i, 0.1, Motion(0.01, 0.002));
+  // The turn speeds up while the translation is left to the prior (e.g. two walls only): the
+  // rotation follows, the translation keeps its last trusted rate, and even beyond the window
+  // (its motions ended 0.3 s before the latest) is not forgotten.
+  for (int i = 11; i <= 13; ++i) {
+    model.Add(0.1 * i, 0.1, Motion(0.05, 0.006), /*translation_known=*/false);
+  }
+  const Pose predicted = model.Predict(0.1);
+  EXPECT_NEAR(predicted.translation().x(), 0.01, 1e-12);
+  EXPECT_NEAR(LogSO3(predicted.linear()).z(), 0.006, 1e-12);
+  // And the other way round.
+  model.Add(1.4, 0.1, Motion(0.02, 0.5), /*translation_known=*/true, /*rotation_known=*/false);
+  EXPECT_NEAR(model.Predict(0.1).translation().x(), 0.02, 1e-12);
+  EXPECT_NEAR(LogSO3(model.Predict(0.1).linear()).z(), 0.006, 1e-12);
 }
 
 }  // namespace

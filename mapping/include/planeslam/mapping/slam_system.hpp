@@ -69,7 +69,8 @@ struct SlamConfig {
   int prior_gate_max_refusals = 3;
   /// Keep the last well-determined velocity on degenerate (and refused) frames instead of
   /// re-estimating it from a result whose open directions came from the prior itself (feedback:
-  /// a bias there grows frame after frame).
+  /// a bias there grows frame after frame); translation and rotation separately, each when the
+  /// planes left any of its directions open.
   bool hold_velocity_when_degenerate = true;
   /// The velocity of the constant-velocity prediction is the mean rate of the well-determined
   /// frame-to-frame motions of the last this many seconds (0: the last one alone). A single

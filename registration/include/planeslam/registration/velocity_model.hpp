@@ -15,22 +15,33 @@ class VelocityModel {
   explicit VelocityModel(double window = 0.0) : window_(window) {}
 
   /// Adds the motion T_prev_curr of a frame at `timestamp` that came `dt` seconds after the
-  /// previous one; ignored unless dt > 0.
-  void Add(double timestamp, double dt, const Pose& T_prev_curr);
+  /// previous one; ignored unless dt > 0. A part the caller does not trust (e.g. translation the
+  /// planes left to the prior) is left out: that part keeps the rate of its own last motions.
+  void Add(double timestamp, double dt, const Pose& T_prev_curr, bool translation_known = true,
+           bool rotation_known = true);
   /// Predicted T_prev_curr for a frame `dt` seconds after the previous one (identity without
   /// motions or for dt <= 0).
   Pose Predict(double dt) const;
-  bool empty() const { return motions_.empty(); }
-  void Clear() { motions_.clear(); }
+  bool empty() const { return translation_.empty() && rotation_.empty(); }
+  void Clear() {
+    translation_.clear();
+    rotation_.clear();
+  }
 
  private:
   struct Motion {
     double timestamp;
     double dt;
-    Vector6d delta;  ///< BoxMinus(T_prev_curr, identity)
+    Eigen::Vector3d delta;  ///< translation, or rotation vector, of the frame's motion
   };
+  /// Adds to one part's window and forgets what the window has passed.
+  void AddTo(std::deque<Motion>& motions, double timestamp, double dt,
+             const Eigen::Vector3d& delta) const;
+  /// Mean rate of one part's window times dt (zero without motions).
+  static Eigen::Vector3d Rate(const std::deque<Motion>& motions, double dt);
   double window_;
-  std::deque<Motion> motions_;
+  std::deque<Motion> translation_;
+  std::deque<Motion> rotation_;
 };
 
 }  // namespace planeslam::registration
