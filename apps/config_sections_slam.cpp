@@ -32,6 +32,9 @@ void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
           "[s] the predicted velocity is the mean of the well-determined motions of this last "
           "span (0 = the last motion alone)",
           0.0, 1000.0);
+  v.Field("continue_held_turn", c.continue_held_turn,
+          "while the planes leave a rotation open, continue the turn along the trend of its "
+          "rate (constant angular acceleration) instead of its mean");
   v.Field("point_to_plane_fill", c.point_to_plane_fill,
           "fill directions the planes leave open by point-to-plane alignment of the clouds");
   v.Field("plane_landmarks", c.plane_landmarks,

@@ -119,7 +119,11 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
   const Keyframe& keyframe = keyframes_.back();
   registration::MotionPrior prior;
   const double dt = timestamp - frames_.back().timestamp;
-  prior.T_prev_curr = T_keyframe_last_ * velocity_.Predict(dt);  // constant velocity
+  // Constant velocity; a turn whose rate the planes have stopped measuring continues along its
+  // trend (see SlamConfig::continue_held_turn).
+  prior.T_prev_curr = T_keyframe_last_ * (config_.continue_held_turn
+                                              ? velocity_.PredictContinuingHeldTurn(dt, timestamp)
+                                              : velocity_.Predict(dt));
   // The prediction is uncertain by the last frame's own uncertainty relative to the keyframe
   // plus one frame's change of velocity: in directions the planes have left open since the
   // keyframe the prior's error accumulates frame after frame, and the odometry edge must say so.

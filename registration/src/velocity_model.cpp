@@ -30,6 +30,36 @@ Eigen::Vector3d VelocityModel::Rate(const std::deque<Motion>& motions, double dt
   return sum * (dt / duration);
 }
 
+Eigen::Vector3d VelocityModel::TrendRate(const std::deque<Motion>& motions, double at, double dt) {
+  if (motions.size() < 4) return Rate(motions, dt);
+  // Each motion's rate belongs to the middle of its interval; times relative to the latest end.
+  const double t_latest = motions.back().timestamp;
+  double n = 0.0, st = 0.0, stt = 0.0;
+  Eigen::Vector3d sr = Eigen::Vector3d::Zero(), str = Eigen::Vector3d::Zero();
+  for (const Motion& m : motions) {
+    const double t = m.timestamp - 0.5 * m.dt - t_latest;
+    const Eigen::Vector3d rate = m.delta / m.dt;
+    n += 1.0;
+    st += t;
+    stt += t * t;
+    sr += rate;
+    str += t * rate;
+  }
+  const double spread = stt - st * st / n;
+  if (!(spread > 0.0)) return Rate(motions, dt);
+  const Eigen::Vector3d slope = (str - sr * (st / n)) / spread;
+  return (sr / n + slope * (at - st / n)) * dt;
+}
+
+Pose VelocityModel::PredictContinuingHeldTurn(double dt, double timestamp) const {
+  if (rotation_.empty() || !(dt > 0)) return Predict(dt);
+  const double since = timestamp - rotation_.back().timestamp;  // end of the last known turn
+  if (!(since > 1.5 * dt)) return Predict(dt);                  // not held: the mean
+  Vector6d delta;
+  delta << Rate(translation_, dt), TrendRate(rotation_, std::min(since - 0.5 * dt, window_), dt);
+  return BoxPlus(Pose::Identity(), delta);
+}
+
 Pose VelocityModel::Predict(double dt) const {
   if (empty() || !(dt > 0)) return Pose::Identity();
   Vector6d delta;

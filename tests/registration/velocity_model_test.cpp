@@ -74,5 +74,33 @@ TEST(VelocityModel, AnUntrustedPartKeepsItsOwnRateWhileTheOtherFollows) {
   EXPECT_NEAR(LogSO3(model.Predict(0.1).linear()).z(), 0.006, 1e-12);
 }
 
+TEST(VelocityModel, AHeldTurnContinuesAlongItsTrend) {
+  // The yaw rate grows by 1 rad/s per second; the motion of the frame ending at t covers
+  // [t - 0.1, t], so its mean rate is that at t - 0.05. From 1.0 s on the rotation is held (the
+  // planes no longer see it): the frame ending at 1.3 s turns at the rate of 1.25 s, which the
+  // trend gives exactly, while the window's mean is that of 0.75 s.
+  auto rate = [](double t) { return 0.2 + 1.0 * t; };
+  VelocityModel model(0.45);
+  for (int i = 1; i <= 10; ++i) {
+    const double t = 0.1 * i;
+    model.Add(t, 0.1, Motion(0.01, 0.1 * rate(t - 0.05)));
+  }
+  for (int i = 11; i <= 12; ++i) {
+    model.Add(0.1 * i, 0.1, Motion(0.01, 0.0), /*translation_known=*/true,
+              /*rotation_known=*/false);
+  }
+  EXPECT_NEAR(LogSO3(model.PredictContinuingHeldTurn(0.1, 1.3).linear()).z(), 0.1 * rate(1.25),
+              1e-12);
+  EXPECT_NEAR(LogSO3(model.Predict(0.1).linear()).z(), 0.1 * rate(0.75), 1e-12);
+  // The continuation goes at most one window beyond the last measured turn.
+  EXPECT_NEAR(LogSO3(model.PredictContinuingHeldTurn(0.1, 5.0).linear()).z(),
+              LogSO3(model.PredictContinuingHeldTurn(0.1, 1.0 + 0.45 + 0.05).linear()).z(), 1e-12);
+  EXPECT_NEAR(LogSO3(model.PredictContinuingHeldTurn(0.1, 5.0).linear()).z(), 0.1 * rate(1.45),
+              1e-12);
+  // Not held (the last motion ended at the previous frame): the mean, as Predict.
+  model.Add(1.3, 0.1, Motion(0.01, 0.1 * rate(1.25)));
+  EXPECT_TRUE(model.PredictContinuingHeldTurn(0.1, 1.4).isApprox(model.Predict(0.1), 1e-15));
+}
+
 }  // namespace
 }  // namespace planeslam::registration
