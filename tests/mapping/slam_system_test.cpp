@@ -123,7 +123,7 @@ detection::Segmentation PlanesOnly(std::vector<detection::Plane> planes) {
 
 TEST(SlamSystem, FrameWhosePlanesAllMatchKeepsItsKeyframe) {
   // Two walls only (normals x and z), seen from a camera sliding along y by 1 cm per frame: every
-  // frame matches 2 planes, fewer than keyframe_min_matches (4), but has no plane its keyframe
+  // frame matches 2 planes, fewer than keyframe_min_matches (6), but has no plane its keyframe
   // lacks, so it stays with the first keyframe. A third plane then renews the keyframe.
   SlamSystem slam(SlamConfig{}, {}, {}, {}, {}, {});
   const datasets::OrganizedCloud cloud(8, 8);  // no points: tracking needs only the planes
