@@ -3,7 +3,7 @@
 namespace planeslam::registration {
 
 void VelocityModel::AddTo(std::deque<Motion>& motions, double timestamp, double dt,
-                          const Eigen::Vector3d& delta) const {
+                          const Eigen::Vector3d& delta) {
   motions.push_back({timestamp, dt, delta});
   while (motions.size() > 1 && motions.front().timestamp < timestamp - window_) {
     motions.pop_front();

@@ -40,7 +40,7 @@ class VelocityModel {
   };
   /// Adds to one part's window and forgets what the window has passed.
   void AddTo(std::deque<Motion>& motions, double timestamp, double dt,
-             const Eigen::Vector3d& delta) const;
+             const Eigen::Vector3d& delta);
   /// Mean rate of one part's window times dt (zero without motions).
   static Eigen::Vector3d Rate(const std::deque<Motion>& motions, double dt);
   /// The rate of the least-squares line through the window's rates at time `at` (relative to the
