@@ -140,53 +140,6 @@ void SmallestEigenvector(const double c[6], SymEigen3& e) {
   e.l1 = std::max(0.0, std::min(rq, e.l2));
 }
 
-namespace {
-
-/// Adjugate of the symmetric C as its upper triangle {a00, a01, a02, a11, a12, a22}.
-void Adjugate(const double c[6], double a[6]) {
-  a[0] = c[3] * c[5] - c[4] * c[4];
-  a[1] = c[2] * c[4] - c[1] * c[5];
-  a[2] = c[1] * c[4] - c[2] * c[3];
-  a[3] = c[0] * c[5] - c[2] * c[2];
-  a[4] = c[1] * c[2] - c[0] * c[4];
-  a[5] = c[0] * c[3] - c[1] * c[1];
-}
-
-/// Smallest eigenpair of C by two steps of power iteration on adj C = det(C) C^-1 (a = adj C)
-/// from x: its dominant eigenvector is C's smallest one, converging by a factor l1/l2 per step,
-/// with no division and no trouble when C is singular (exactly planar points). l1 is the
-/// Rayleigh quotient, l2 and l3 follow from the trace and the second invariant. False when
-/// l1 > 0.01 l2 (poorly separated) or x is orthogonal to the answer.
-bool AdjugatePowerIteration(const double c[6], const double a[6], Eigen::Vector3d x, SymEigen3& e) {
-  for (int it = 0; it < 2; ++it) {
-    x = Eigen::Vector3d(a[0] * x.x() + a[1] * x.y() + a[2] * x.z(),
-                        a[1] * x.x() + a[3] * x.y() + a[4] * x.z(),
-                        a[2] * x.x() + a[4] * x.y() + a[5] * x.z());
-  }
-  // Normalised once: adj C scales as C^2, so two steps stay far inside double range for any
-  // point spread between 0.1 mm and kilometres.
-  const double norm2 = x.squaredNorm();
-  if (!(norm2 > 1e-300) || !std::isfinite(norm2)) return false;
-  x /= std::sqrt(norm2);
-  const double l1 =
-      std::max(0.0, c[0] * x.x() * x.x() + c[3] * x.y() * x.y() + c[5] * x.z() * x.z() +
-                        2.0 * (c[1] * x.x() * x.y() + c[2] * x.x() * x.z() + c[4] * x.y() * x.z()));
-  const double s = c[0] + c[3] + c[5] - l1;  // l2 + l3
-  const double e2 = a[0] + a[3] + a[5];      // l1 l2 + l1 l3 + l2 l3
-  const double p = e2 - l1 * s;              // l2 l3
-  const double disc = std::sqrt(std::max(0.0, s * s - 4.0 * p));
-  const double l3 = 0.5 * (s + disc);
-  const double l2 = l3 > 0 ? p / l3 : 0.0;  // not (s - disc) / 2, which cancels when l2 << l3
-  if (!(l1 <= 0.01 * l2)) return false;
-  e.l1 = l1;
-  e.l2 = l2;
-  e.l3 = l3;
-  e.v1 = x;
-  return true;
-}
-
-}  // namespace
-
 void SymEigenvaluesAscending(const double c[6], double& l1, double& l2, double& l3,
                              double relative_tolerance) {
   if (!SymEigenvaluesNewton(c, relative_tolerance, l1, l2, l3)) SymEigenvalues3(c, l1, l2, l3);
@@ -224,14 +177,35 @@ FastFit FitSums(const MomentSums& m) {
 
 FastFit RefitFrom(const MomentSums& m, const Eigen::Vector3d& n0) {
   if (m.k < 3) return FitSums(m);
-  double c[6], a[6];
+  double c[6];
   m.Scatter(c);
-  Adjugate(c, a);
-  SymEigen3 e;
-  if (!AdjugatePowerIteration(c, a, n0, e)) return FitSums(m);
+  // Adjugate of the symmetric C (cofactors), also symmetric.
+  const double a00 = c[3] * c[5] - c[4] * c[4], a01 = c[2] * c[4] - c[1] * c[5],
+               a02 = c[1] * c[4] - c[2] * c[3], a11 = c[0] * c[5] - c[2] * c[2],
+               a12 = c[1] * c[2] - c[0] * c[4], a22 = c[0] * c[3] - c[1] * c[1];
+  Eigen::Vector3d x = n0;
+  for (int it = 0; it < 2; ++it) {
+    x = Eigen::Vector3d(a00 * x.x() + a01 * x.y() + a02 * x.z(),
+                        a01 * x.x() + a11 * x.y() + a12 * x.z(),
+                        a02 * x.x() + a12 * x.y() + a22 * x.z());
+  }
+  // Normalised once: adj C scales as C^2, so two steps stay far inside double range for any
+  // point spread between 0.1 mm and kilometres.
+  const double norm2 = x.squaredNorm();
+  if (!(norm2 > 1e-300) || !std::isfinite(norm2)) return FitSums(m);
+  x /= std::sqrt(norm2);
+  const double l1 =
+      std::max(0.0, c[0] * x.x() * x.x() + c[3] * x.y() * x.y() + c[5] * x.z() * x.z() +
+                        2.0 * (c[1] * x.x() * x.y() + c[2] * x.x() * x.z() + c[4] * x.y() * x.z()));
+  const double s = c[0] + c[3] + c[5] - l1;  // l2 + l3
+  const double e2 = a00 + a11 + a22;         // l1 l2 + l1 l3 + l2 l3
+  const double p = e2 - l1 * s;              // l2 l3
+  const double disc = std::sqrt(std::max(0.0, s * s - 4.0 * p));
+  const double l3 = 0.5 * (s + disc);
+  const double l2 = l3 > 0 ? p / l3 : 0.0;  // not (s - disc) / 2, which cancels when l2 << l3
+  if (!(l1 <= 0.01 * l2)) return FitSums(m);
   FastFit f;
   f.centroid = m.Centroid();
-  Eigen::Vector3d x = e.v1;
   double d = x.dot(f.centroid);
   if (d < 0) {
     x = -x;
@@ -239,10 +213,10 @@ FastFit RefitFrom(const MomentSums& m, const Eigen::Vector3d& n0) {
   }
   f.normal = x;
   f.d = d;
-  f.l1 = e.l1;
-  f.l2 = std::max(0.0, e.l2);
-  f.l3 = std::max(0.0, e.l3);
-  f.mse = e.l1 / m.k;
+  f.l1 = l1;
+  f.l2 = std::max(0.0, l2);
+  f.l3 = std::max(0.0, l3);
+  f.mse = l1 / m.k;
   return f;
 }
 

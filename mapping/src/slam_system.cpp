@@ -195,7 +195,6 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
   // New keyframe: node, odometry edge weighted by the registration's uncertainty, map planes.
   const std::int64_t previous_id = keyframe.id;
   AddKeyframe(result.index, result.T_world_sensor, segmentation, cloud);
-  keyframes_.back().T_previous_keyframe = T_keyframe_curr;
   const Keyframe& current = keyframes_.back();
   graph_.AddEdge(previous_id, current.id, T_keyframe_curr, InformationFromCovariance(covariance),
                  EdgeKind::kOdometry);
@@ -337,12 +336,20 @@ PoseGraphResult SlamSystem::Finish() {
 }
 
 datasets::Trajectory SlamSystem::EstimatedTrajectory() const {
+  // The measured pose of each keyframe in its predecessor: its odometry edge.
+  std::unordered_map<std::int64_t, Pose> measured_in_previous;
+  if (config_.interpolate_frames) {
+    for (const PoseGraphEdge& edge : graph_.edges()) {
+      if (edge.kind == EdgeKind::kOdometry) measured_in_previous[edge.to] = edge.T_a_b();
+    }
+  }
   datasets::Trajectory trajectory;
   for (std::size_t f = 0; f < frames_.size(); ++f) {
     const FrameRecord& record = frames_[f];
     const Pose T_world_keyframe = KeyframePose(record.keyframe_id);
-    const std::size_t next_id = static_cast<std::size_t>(record.keyframe_id) + 1;
-    if (!config_.interpolate_frames || next_id >= keyframes_.size()) {
+    const std::int64_t next_id = record.keyframe_id + 1;
+    const auto measured = measured_in_previous.find(next_id);
+    if (measured == measured_in_previous.end()) {
       trajectory.Add(record.timestamp, T_world_keyframe * record.T_keyframe_frame);
       continue;
     }
@@ -350,11 +357,11 @@ datasets::Trajectory SlamSystem::EstimatedTrajectory() const {
     // T_keyframe_next = correction * measured. The frames between the two were tracked against
     // this keyframe and drifted along the way, so each takes the share of the correction that
     // matches how far along it is (a keyframe's own frame takes none, the next keyframe all).
-    const Keyframe& next = keyframes_[next_id];
     const std::size_t first = keyframes_[static_cast<std::size_t>(record.keyframe_id)].frame;
-    const double alpha = static_cast<double>(f - first) / static_cast<double>(next.frame - first);
+    const std::size_t last = keyframes_[static_cast<std::size_t>(next_id)].frame;
+    const double alpha = static_cast<double>(f - first) / static_cast<double>(last - first);
     const Pose correction =
-        T_world_keyframe.inverse() * KeyframePose(next.id) * next.T_previous_keyframe.inverse();
+        T_world_keyframe.inverse() * KeyframePose(next_id) * measured->second.inverse();
     const Pose share = registration::BoxPlus(
         Pose::Identity(), alpha * registration::BoxMinus(correction, Pose::Identity()));
     trajectory.Add(record.timestamp, T_world_keyframe * share * record.T_keyframe_frame);

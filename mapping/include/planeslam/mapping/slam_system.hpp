@@ -197,8 +197,6 @@ class SlamSystem {
     std::int64_t id = 0;
     std::size_t frame = 0;
     std::vector<detection::Plane> planes;
-    /// Measured pose in the previous keyframe (its odometry edge; identity for the first).
-    Pose T_previous_keyframe = Pose::Identity();
   };
   struct FrameRecord {
     double timestamp = 0.0;
