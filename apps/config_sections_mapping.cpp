@@ -63,10 +63,13 @@ void VisitPlaneMap(FieldVisitor& v, mapping::PlaneMapConfig& c) {
           "[samples] observed samples within max_gap of a map plane needed to call them touching",
           1, 1000000);
   v.Field("merge_max_normal_angle_deg", c.merge_max_normal_angle_deg,
-          "[deg] largest angle between two touching map planes to merge them into one", 0.0, 90.0);
+          "[deg] largest angle between two map planes to merge them into one", 0.0, 90.0);
   v.Field("merge_max_offset", c.merge_max_offset,
           "[m] largest distance of each map plane's centroid from the other to merge them", 0.0,
           100.0);
+  v.Field("merge_across_gaps", c.merge_across_gaps,
+          "in the finished map, merge map planes within the merge thresholds even when their "
+          "extents are apart (one plane seen in separate parts; the outline keeps each part)");
   v.Field("min_observation_points", c.min_observation_points,
           "[points] detected planes with fewer points are not added to the map", 3, 100000000);
   v.Field("sample_cell_size", c.sample_cell_size,
@@ -98,8 +101,7 @@ void VisitOctomap(FieldVisitor& v, mapping::OccupancyMapConfig& c) {
           "build an OctoMap from the keyframes and write octomap.bt (needs a build with OctoMap)");
   v.Field("resolution", c.resolution, "[m] leaf voxel edge", 1e-3, 100.0);
   v.Field("max_range", c.max_range,
-          "[m] rays longer than this only clear free space up to it; <= 0 = unlimited", -1.0,
-          1e6);
+          "[m] rays longer than this only clear free space up to it; <= 0 = unlimited", -1.0, 1e6);
   v.Field("downsample_voxel", c.downsample_voxel,
           "[m] voxel grid applied to each frame before ray casting; 0 = off", 0.0, 100.0);
   v.Field("prob_hit", c.prob_hit, "[probability] occupancy update of a ray's end voxel (> 0.5)",

@@ -60,20 +60,31 @@ struct Mesh {
 Mesh BuildMesh(const std::vector<MapPlaneRecord>& planes) {
   Mesh mesh;
   for (const auto& p : planes) {
-    if (p.polygon.size() < 3 || p.triangles.empty()) continue;
-    const int base = static_cast<int>(mesh.vertices.size());
-    for (const auto& t : p.triangles) {
-      for (int k : t) {
-        PLANESLAM_CHECK(k >= 0 && k < static_cast<int>(p.polygon.size()),
-                        "plane " << p.id << ": triangle index " << k << " out of range");
+    PLANESLAM_CHECK(p.triangles.size() == p.polygons.size(),
+                    "plane " << p.id << ": " << p.triangles.size() << " triangle lists for "
+                             << p.polygons.size() << " polygons");
+    bool object_started = false;
+    for (std::size_t part = 0; part < p.polygons.size(); ++part) {
+      const auto& polygon = p.polygons[part];
+      const auto& triangles = p.triangles[part];
+      if (polygon.size() < 3 || triangles.empty()) continue;
+      for (const auto& t : triangles) {
+        for (int k : t) {
+          PLANESLAM_CHECK(k >= 0 && k < static_cast<int>(polygon.size()),
+                          "plane " << p.id << ": triangle index " << k << " out of range");
+        }
+      }
+      if (!object_started) mesh.objects.emplace_back(p.id, mesh.faces.size());
+      object_started = true;
+      const int base = static_cast<int>(mesh.vertices.size());
+      for (const auto& v : polygon) {
+        mesh.vertices.push_back(v.cast<float>());
+        mesh.colors.push_back(p.color);
+      }
+      for (const auto& t : triangles) {
+        mesh.faces.push_back({base + t[0], base + t[2], base + t[1]});
       }
     }
-    mesh.objects.emplace_back(p.id, mesh.faces.size());
-    for (const auto& v : p.polygon) {
-      mesh.vertices.push_back(v.cast<float>());
-      mesh.colors.push_back(p.color);
-    }
-    for (const auto& t : p.triangles) mesh.faces.push_back({base + t[0], base + t[2], base + t[1]});
   }
   return mesh;
 }
@@ -129,17 +140,15 @@ std::vector<MapPlaneRecord> MakeMapRecords(const PlaneMap& map, int min_observat
   for (const MapPlane& p : map.planes()) {
     if (static_cast<int>(p.observations.size()) < min_observations) continue;
     const MapPlaneOutline o = map.Outline(p);
-    if (min_area > 0 && (!o.polygon.valid || o.polygon.area < min_area)) continue;
+    if (min_area > 0 && o.region.area < min_area) continue;
     MapPlaneRecord r;
     r.id = p.id;
     r.normal = p.normal;
     r.d = p.d;
     r.centroid = p.centroid;
-    if (o.polygon.valid) {
-      r.polygon = o.vertices;
-      r.triangles = o.triangles;
-      r.area = o.polygon.area;
-    }
+    r.polygons = o.part_vertices;
+    r.triangles = o.part_triangles;
+    r.area = o.region.area;
     r.observed_area = o.observed_area;
     r.point_count = p.point_count();
     r.rms = std::sqrt(std::max(p.mse, 0.0));
@@ -192,7 +201,7 @@ void WritePlaneMapObj(const std::string& path, const std::vector<MapPlaneRecord>
 }
 
 void WritePlaneMapJson(const std::string& path, const std::vector<MapPlaneRecord>& planes) {
-  std::string out = "{\n  \"format\": \"planeslam-plane-map\",\n  \"version\": 1,\n";
+  std::string out = "{\n  \"format\": \"planeslam-plane-map\",\n  \"version\": 2,\n";
   out += "  \"frame\": \"world\",\n  \"units\": \"m\",\n  \"planes\": [";
   for (std::size_t i = 0; i < planes.size(); ++i) {
     const MapPlaneRecord& p = planes[i];
@@ -210,9 +219,13 @@ void WritePlaneMapJson(const std::string& path, const std::vector<MapPlaneRecord
     out += ", \"last_frame\": " + std::to_string(p.last_frame);
     out += ", \"color\": [" + std::to_string(p.color[0]) + ", " + std::to_string(p.color[1]) +
            ", " + std::to_string(p.color[2]) + "]";
-    out += ",\n     \"polygon\": [";
-    for (std::size_t k = 0; k < p.polygon.size(); ++k) {
-      out += (k == 0 ? "" : ", ") + Vec(p.polygon[k]);
+    out += ",\n     \"polygons\": [";
+    for (std::size_t part = 0; part < p.polygons.size(); ++part) {
+      out += part == 0 ? "[" : ",\n       [";
+      for (std::size_t k = 0; k < p.polygons[part].size(); ++k) {
+        out += (k == 0 ? "" : ", ") + Vec(p.polygons[part][k]);
+      }
+      out += "]";
     }
     out += "]}";
   }

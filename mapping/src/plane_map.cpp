@@ -301,12 +301,13 @@ int PlaneMap::CountTouching(const Extent& extent, const std::vector<Eigen::Vecto
   return touching;
 }
 
-bool PlaneMap::Coincide(const MapPlane& a, const MapPlane& b) const {
+bool PlaneMap::Coincide(const MapPlane& a, const MapPlane& b, bool across_gaps) const {
   if (a.normal.dot(b.normal) < std::cos(config_.merge_max_normal_angle_deg * kDegToRad)) {
     return false;
   }
   if (std::abs(a.normal.dot(b.centroid) - a.d) > config_.merge_max_offset) return false;
   if (std::abs(b.normal.dot(a.centroid) - b.d) > config_.merge_max_offset) return false;
+  if (across_gaps) return true;
   // Touching: b's occupied cells (as world points) near a's extent.
   const Extent& eb = extents_[IndexOf(b.id)];
   std::vector<Eigen::Vector3d> cells;
@@ -530,14 +531,15 @@ int PlaneMap::Refit(const std::unordered_map<std::int64_t, Pose>& T_world_keyfra
   return MergeCoincidentPlanes();
 }
 
-int PlaneMap::MergeCoincidentPlanes() {
+int PlaneMap::MergeCoincidentPlanes(bool across_gaps) {
   int merges = 0;
   bool changed = true;
   while (changed) {
     changed = false;
     for (std::size_t i = 0; i < planes_.size() && !changed; ++i) {
       for (std::size_t j = i + 1; j < planes_.size() && !changed; ++j) {
-        if (Coincide(planes_[i], planes_[j]) || Coincide(planes_[j], planes_[i])) {
+        if (Coincide(planes_[i], planes_[j], across_gaps) ||
+            Coincide(planes_[j], planes_[i], across_gaps)) {
           const bool i_first = planes_[i].id < planes_[j].id;
           MergeInto(i_first ? i : j, i_first ? j : i);
           ++merges;
@@ -555,10 +557,10 @@ MapPlaneOutline PlaneMap::Outline(const MapPlane& plane) const {
   out.basis = MakePlaneBasis(plane.normal, plane.d);
   std::vector<Eigen::Vector2d> xy;
   for (const auto& p : WorldSamples(plane)) xy.push_back(out.basis.Project(p));
-  out.polygon = ConcaveHull(xy, config_.polygon);
+  out.region = ConcaveHull(xy, config_.polygon);
   {
     const double cell =
-        out.polygon.cell_size > 0 ? out.polygon.cell_size : 2.0 * config_.sample_cell_size;
+        out.region.cell_size > 0 ? out.region.cell_size : 2.0 * config_.sample_cell_size;
     std::unordered_set<std::int64_t> occupied;
     for (const auto& p : xy)
       occupied.insert(CellKey(FloorIndex(p.x(), cell), FloorIndex(p.y(), cell)));
@@ -578,9 +580,11 @@ MapPlaneOutline PlaneMap::Outline(const MapPlane& plane) const {
                         static_cast<double>(boundary_edges) * cell * overshoot;
     out.observed_area = std::max(out.observed_area, 0.0);
   }
-  if (!out.polygon.valid) return out;
-  for (const auto& v : out.polygon.vertices) out.vertices.push_back(out.basis.Unproject(v));
-  out.triangles = TriangulatePolygon(out.polygon.vertices);
+  for (const Polygon2& part : out.region.parts) {
+    auto& world = out.part_vertices.emplace_back();
+    for (const auto& v : part.vertices) world.push_back(out.basis.Unproject(v));
+    out.part_triangles.push_back(TriangulatePolygon(part.vertices));
+  }
   return out;
 }
 

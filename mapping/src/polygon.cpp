@@ -418,10 +418,48 @@ std::vector<std::vector<Eigen::Vector2d>> Contours(const std::vector<std::uint8_
 
 }  // namespace
 
-Polygon2 ConcaveHull(const std::vector<Eigen::Vector2d>& points, const PolygonConfig& config) {
+bool PointInPolygon(const Eigen::Vector2d& p, const std::vector<Eigen::Vector2d>& polygon) {
+  bool inside = false;
+  const std::size_t n = polygon.size();
+  for (std::size_t i = 0, j = n - 1; i < n; j = i++) {
+    const Eigen::Vector2d& a = polygon[i];
+    const Eigen::Vector2d& b = polygon[j];
+    // Half-open in y: a ray through a vertex counts the edges on one side of it only.
+    if ((a.y() > p.y()) != (b.y() > p.y()) &&
+        p.x() < a.x() + (p.y() - a.y()) * (b.x() - a.x()) / (b.y() - a.y())) {
+      inside = !inside;
+    }
+  }
+  return inside;
+}
+
+namespace {
+
+/// Counter-clockwise and Douglas-Peucker simplified; the marching squares ring when every
+/// simplification crossed itself (a thin part), since that ring is simple by construction.
+Polygon2 SimplifiedPart(std::vector<Eigen::Vector2d> ring, double tolerance) {
+  if (SignedArea(ring) < 0.0) std::reverse(ring.begin(), ring.end());
+  Polygon2 part;
+  part.vertices = ring;
+  if (tolerance > 0.0) {
+    for (int attempt = 0; attempt < 8; ++attempt, tolerance *= 0.5) {
+      auto candidate = SimplifyClosedPolygon(ring, tolerance);
+      if (IsSimplePolygon(candidate)) {
+        part.vertices = std::move(candidate);
+        break;
+      }
+    }
+  }
+  part.area = SignedArea(part.vertices);
+  return part;
+}
+
+}  // namespace
+
+RegionOutline ConcaveHull(const std::vector<Eigen::Vector2d>& points, const PolygonConfig& config) {
   const auto problems = config.Validate();
   PLANESLAM_CHECK(problems.empty(), "invalid PolygonConfig: " << problems.front());
-  Polygon2 result;
+  RegionOutline result;
   std::vector<Eigen::Vector2d> finite;
   finite.reserve(points.size());
   for (const auto& p : points) {
@@ -443,38 +481,26 @@ Polygon2 ConcaveHull(const std::vector<Eigen::Vector2d>& points, const PolygonCo
   const Grid grid = MakeGrid(bounds, cell, max_cells);
   result.cell_size = std::sqrt(grid.size.x() * grid.size.y());
   const auto occ = Occupancy(finite, grid, nullptr);
-  auto rings = Contours(occ, grid);
-  if (rings.empty()) return result;
-  std::size_t best = 0;
-  double best_area = 0.0;
+  const auto rings = Contours(occ, grid);
+  // The rings are disjoint simple curves, so one vertex tells whether a ring lies inside another.
+  const double tolerance = config.simplify_tolerance == 0.0
+                               ? kAutoToleranceCells * grid.size.minCoeff()
+                               : config.simplify_tolerance;
   for (std::size_t i = 0; i < rings.size(); ++i) {
-    const double area = std::abs(SignedArea(rings[i]));
-    if (area > best_area) {
-      best_area = area;
-      best = i;
+    if (rings[i].size() < 3) continue;
+    bool nested = false;
+    for (std::size_t j = 0; j < rings.size() && !nested; ++j) {
+      nested = j != i && rings[j].size() >= 3 && PointInPolygon(rings[i].front(), rings[j]);
     }
+    if (nested) continue;
+    Polygon2 part = SimplifiedPart(rings[i], tolerance);
+    if (part.vertices.size() < 3 || !(part.area > 0.0)) continue;
+    result.area += part.area;
+    result.parts.push_back(std::move(part));
   }
-  std::vector<Eigen::Vector2d> ring = std::move(rings[best]);
-  if (ring.size() < 3 || best_area <= 0.0) return result;
-  if (SignedArea(ring) < 0.0) std::reverse(ring.begin(), ring.end());
-
-  double tolerance = config.simplify_tolerance == 0.0 ? kAutoToleranceCells * grid.size.minCoeff()
-                                                      : config.simplify_tolerance;
-  std::vector<Eigen::Vector2d> simplified = ring;
-  if (tolerance > 0.0) {
-    // Simplification can make a thin part cross itself; retry finer, else keep the marching squares
-    // ring, which is simple by construction.
-    for (int attempt = 0; attempt < 8; ++attempt, tolerance *= 0.5) {
-      auto candidate = SimplifyClosedPolygon(ring, tolerance);
-      if (IsSimplePolygon(candidate)) {
-        simplified = std::move(candidate);
-        break;
-      }
-    }
-  }
-  result.vertices = std::move(simplified);
-  result.area = SignedArea(result.vertices);
-  result.valid = result.vertices.size() >= 3 && result.area > 0.0;
+  // Largest first; the rings come in a fixed order, so ties keep a deterministic order too.
+  std::stable_sort(result.parts.begin(), result.parts.end(),
+                   [](const Polygon2& a, const Polygon2& b) { return a.area > b.area; });
   return result;
 }
 

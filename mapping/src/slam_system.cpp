@@ -330,7 +330,8 @@ PoseGraphResult SlamSystem::Finish() {
   const auto start = std::chrono::steady_clock::now();
   PoseGraphResult result;
   if (!graph_.edges().empty()) result = Optimize();
-  map_.MergeCoincidentPlanes();
+  // The poses are final: coplanar parts now become one plane (not before, see merge_across_gaps).
+  map_.MergeCoincidentPlanes(map_.config().merge_across_gaps);
   stats_.time_optimize_ms += ElapsedMs(start);
   return result;
 }

@@ -28,8 +28,8 @@ std::vector<MapPlaneRecord> Records() {
   a.id = 1;
   a.normal = Eigen::Vector3d::UnitZ();
   a.d = 1.0;
-  a.polygon = {{0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};  // counter-clockwise about +z
-  a.triangles = {{{0, 1, 2}}, {{0, 2, 3}}};
+  a.polygons = {{{0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}}};  // counter-clockwise about +z
+  a.triangles = {{{{0, 1, 2}}, {{0, 2, 3}}}};
   a.area = 1.0;
   a.observations = 4;
   a.first_frame = 3;
@@ -39,8 +39,8 @@ std::vector<MapPlaneRecord> Records() {
   b.id = 5;
   b.normal = -Eigen::Vector3d::UnitX();
   b.d = -2.0;
-  b.polygon = {{2, 0, 0}, {2, 0, 1}, {2, 1, 0}};  // counter-clockwise about -x
-  b.triangles = {{{0, 1, 2}}};
+  b.polygons = {{{2, 0, 0}, {2, 0, 1}, {2, 1, 0}}};  // counter-clockwise about -x
+  b.triangles = {{{{0, 1, 2}}}};
   b.area = 0.5;
   b.color = PlaneColor(5);
   MapPlaneRecord c;
@@ -179,6 +179,40 @@ TEST(MapWriters, ObjHasOneObjectPerPlaneAndOneBasedFaces) {
   }
 }
 
+TEST(MapWriters, APlaneOfTwoPartsIsOneObjectWithBothParts) {
+  // A floor seen in two pieces 3 m apart: one plane, one colour, one OBJ object, two JSON polygons.
+  MapPlaneRecord floor;
+  floor.id = 4;
+  floor.polygons = {{{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}},
+                    {{4, 0, 0}, {4.5, 0, 0}, {4.5, 1, 0}}};
+  floor.triangles = {{{{0, 1, 2}}, {{0, 2, 3}}}, {{{0, 1, 2}}}};
+  floor.area = 1.25;
+  floor.color = PlaneColor(4);
+  const auto dir = test::ScratchDir();
+  WritePlaneMapPly((dir / "floor.ply").string(), {floor}, PlyFormat::kAscii);
+  const std::string ply = ReadAll(dir / "floor.ply");
+  EXPECT_NE(ply.find("element vertex 7\n"), std::string::npos);
+  EXPECT_NE(ply.find("element face 3\n"), std::string::npos);
+  // The second part's face indexes its own vertices, after the first part's four.
+  EXPECT_NE(ply.find("3 4 6 5\n"), std::string::npos);
+
+  WritePlaneMapObj((dir / "floor.obj").string(), {floor});
+  const std::string obj = ReadAll(dir / "floor.obj");
+  EXPECT_EQ(obj.find("o plane_4"), obj.rfind("o plane_"));  // one object
+  EXPECT_NE(obj.find("f 5 7 6\n"), std::string::npos);
+
+  WritePlaneMapJson((dir / "floor.json").string(), {floor});
+  const std::string json = ReadAll(dir / "floor.json");
+  EXPECT_NE(json.find("\"polygons\": [[[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]],\n"
+                      "       [[4, 0, 0], [4.5, 0, 0], [4.5, 1, 0]]]"),
+            std::string::npos)
+      << json;
+
+  MapPlaneRecord broken = floor;
+  broken.triangles.pop_back();  // one triangle list for two polygons
+  EXPECT_THROW(WritePlaneMapPly((dir / "broken.ply").string(), {broken}), CheckError);
+}
+
 TEST(MapWriters, JsonListsEveryPlaneWithRoundTrippingNumbers) {
   const auto dir = test::ScratchDir();
   const auto path = (dir / "plane_map.json").string();
@@ -186,7 +220,8 @@ TEST(MapWriters, JsonListsEveryPlaneWithRoundTrippingNumbers) {
   const std::string text = ReadAll(path);
   EXPECT_NE(text.find("\"format\": \"planeslam-plane-map\""), std::string::npos);
   EXPECT_NE(text.find("\"id\": 9"), std::string::npos);
-  EXPECT_NE(text.find("\"polygon\": []"), std::string::npos);  // no outline: still listed
+  EXPECT_NE(text.find("\"version\": 2"), std::string::npos);
+  EXPECT_NE(text.find("\"polygons\": []"), std::string::npos);  // no outline: still listed
   EXPECT_NE(text.find("\"first_frame\": 3, \"last_frame\": 17"), std::string::npos);
   const std::size_t at = text.find("\"d\": ", text.find("\"id\": 9"));
   ASSERT_NE(at, std::string::npos);
@@ -282,9 +317,11 @@ TEST(MapWriters, RecordsFromAPlaneMapCarryOutlinesOnTheirPlanes) {
   EXPECT_EQ(r.point_count, 5000);
   EXPECT_NEAR(r.d, 3.0, 1e-9);
   EXPECT_NEAR(r.area, 2.0, 0.15 * 2.0);
-  ASSERT_GE(r.polygon.size(), 4u);
-  EXPECT_EQ(r.triangles.size(), r.polygon.size() - 2);
-  for (const auto& v : r.polygon) EXPECT_NEAR(v.z(), 3.0, 1e-9);
+  ASSERT_EQ(r.polygons.size(), 1u);
+  ASSERT_GE(r.polygons[0].size(), 4u);
+  ASSERT_EQ(r.triangles.size(), 1u);
+  EXPECT_EQ(r.triangles[0].size(), r.polygons[0].size() - 2);
+  for (const auto& v : r.polygons[0]) EXPECT_NEAR(v.z(), 3.0, 1e-9);
   EXPECT_EQ(r.color, PlaneColor(1));
   EXPECT_TRUE(MakeMapRecords(map, 2).empty());       // seen once only
   EXPECT_TRUE(MakeMapRecords(map, 1, 2.5).empty());  // smaller than 2.5 m^2

@@ -223,16 +223,18 @@ TEST(PlaneMap, RoomPlanesAppearOnceWithAccurateNormalsAndAreas) {
     matched_ids.insert(p->id);
     EXPECT_LT(angle, 1.0) << "rect " << r;
     const MapPlaneOutline outline = map.Outline(*p);
-    ASSERT_TRUE(outline.polygon.valid) << "rect " << r;
+    ASSERT_TRUE(outline.region.valid()) << "rect " << r;
     // The outline has no holes (the floor under the sensors is never seen): compare it with the
     // seen region with its holes filled, and the observed area with the seen area.
-    EXPECT_NEAR(outline.polygon.area, filled_area, 0.15 * filled_area) << "rect " << r;
+    EXPECT_NEAR(outline.region.area, filled_area, 0.15 * filled_area) << "rect " << r;
     EXPECT_NEAR(outline.observed_area, true_area, 0.15 * true_area) << "rect " << r;
     std::printf(
         "rect %zu: seen %.3f m^2 (filled %.3f), outline %.3f, observed %.3f, angle %.3f deg\n", r,
-        true_area, filled_area, outline.polygon.area, outline.observed_area, angle);
+        true_area, filled_area, outline.region.area, outline.observed_area, angle);
     // Outline vertices lie on the map plane.
-    for (const auto& v : outline.vertices) EXPECT_NEAR(p->normal.dot(v), p->d, 1e-9);
+    for (const auto& part : outline.part_vertices) {
+      for (const auto& v : part) EXPECT_NEAR(p->normal.dot(v), p->d, 1e-9);
+    }
     // The normal points away from the sensors that saw it.
     for (const auto& obs : p->observations) {
       EXPECT_LT(p->normal.dot(map.KeyframePose(obs.keyframe_id).translation()), p->d);
@@ -272,7 +274,7 @@ TEST(PlaneMap, PlaneSeenInTwoSeparateHalvesMergesWhenTheGapIsSeen) {
   EXPECT_EQ(map.planes()[0].first_keyframe, 0);
   EXPECT_EQ(map.planes()[0].last_keyframe, 2);
   const MapPlaneOutline o = map.Outline(map.planes()[0]);
-  EXPECT_NEAR(o.polygon.area, 6.0 * 2.5, 0.15 * 6.0 * 2.5);
+  EXPECT_NEAR(o.region.area, 6.0 * 2.5, 0.15 * 6.0 * 2.5);
 }
 
 TEST(PlaneMap, SamplesGrowWithAreaNotWithKeyframes) {
@@ -295,8 +297,8 @@ TEST(PlaneMap, SamplesGrowWithAreaNotWithKeyframes) {
   EXPECT_GT(map.WorldSamples(map.planes()[0]).size(), first * 18 / 10);
 }
 
-TEST(PlaneMap, CoplanarButDistantOrOppositePlanesStayApart) {
-  // Two table tops at the same height 3 m apart, and the two faces of a 10 cm thick partition.
+TEST(PlaneMap, CoplanarDistantPlanesStayApartUntilTheFinishedMapJoinsThemAsParts) {
+  // Two table tops at the same height 3 m apart, seen by two keyframes.
   const std::vector<Rect> rects = {
       {{0, 0, 0.7}, {1, 0, 0}, {0, 1, 0}},
       {{4, 0, 0.7}, {1, 0, 0}, {0, 1, 0}},
@@ -311,10 +313,25 @@ TEST(PlaneMap, CoplanarButDistantOrOppositePlanesStayApart) {
   const SimFrame f2 = Simulate(
       rects, 0.02, T_top, [](const Pose&, const Eigen::Vector3d& p) { return p.x() > 2; }, 0.003,
       rng);
-  map.AddObservations(1, T_top, f2.planes, f2.points);
-  EXPECT_EQ(map.size(), 2u);
-  EXPECT_EQ(map.MergeCoincidentPlanes(), 0);
+  // Association is local: the second top does not join the first one's map plane.
+  EXPECT_EQ(map.AddObservations(1, T_top, f2.planes, f2.points).created, 1);
+  ASSERT_EQ(map.size(), 2u);
+  EXPECT_EQ(map.MergeCoincidentPlanes(), 0);  // they do not touch
+  // The finished map: one plane z = 0.7, its outline in two parts of 1 m^2 each.
+  EXPECT_EQ(map.MergeCoincidentPlanes(/*across_gaps=*/true), 1);
+  ASSERT_EQ(map.size(), 1u);
+  EXPECT_NEAR(std::abs(map.planes()[0].d), 0.7, 0.005);
+  const MapPlaneOutline outline = map.Outline(map.planes()[0]);
+  ASSERT_EQ(outline.region.parts.size(), 2u);
+  for (const Polygon2& part : outline.region.parts) EXPECT_NEAR(part.area, 1.0, 0.15);
+  ASSERT_EQ(outline.part_vertices.size(), 2u);
+  const double x0 = outline.part_vertices[0].front().x();
+  const double x1 = outline.part_vertices[1].front().x();
+  EXPECT_GT(std::max(x0, x1) - std::min(x0, x1), 2.5);  // one part per table
+}
 
+TEST(PlaneMap, TheTwoFacesOfAPartitionStayApart) {
+  std::mt19937 rng(3);
   PlaneMap faces;
   const std::vector<Rect> a = {{{0, 2.0, 0}, {3, 0, 0}, {0, 0, 2}}};
   const std::vector<Rect> b = {{{0, 2.02, 0}, {3, 0, 0}, {0, 0, 2}}};
@@ -412,7 +429,7 @@ TEST(PlaneMap, SameInputGivesTheSameMap) {
     EXPECT_EQ(planes[0][i].id, planes[1][i].id);
     EXPECT_EQ(planes[0][i].normal, planes[1][i].normal);  // bit-identical
     EXPECT_EQ(planes[0][i].d, planes[1][i].d);
-    EXPECT_EQ(outlines[0][i].vertices, outlines[1][i].vertices);
+    EXPECT_EQ(outlines[0][i].part_vertices, outlines[1][i].part_vertices);
   }
 }
 
@@ -462,7 +479,7 @@ TEST(PlaneMap, PlanesWithoutPointsUseTheirSecondMomentsAsExtent) {
   map.AddObservations(1, T, f2.planes, {});
   ASSERT_EQ(map.size(), 1u);
   // The uniform-rectangle extent has the true size: outline area near 6 x 2.5.
-  EXPECT_NEAR(map.Outline(map.planes()[0]).polygon.area, 15.0, 0.15 * 15.0);
+  EXPECT_NEAR(map.Outline(map.planes()[0]).region.area, 15.0, 0.15 * 15.0);
 }
 
 TEST(PlaneMap, SmallPlanesAreSkippedAndKeyframePosesAreChecked) {

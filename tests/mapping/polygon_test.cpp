@@ -41,11 +41,9 @@ double TriangulatedArea(const Points& polygon) {
   return area;
 }
 
-void CheckHull(const Points& points, double true_area, const std::string& what,
-               const PolygonConfig& config = {}) {
-  const Polygon2 hull = ConcaveHull(points, config);
-  ASSERT_TRUE(hull.valid) << what;
-  EXPECT_NEAR(hull.area, true_area, 0.05 * true_area) << what << " cell " << hull.cell_size;
+/// One part of an outline: counter-clockwise, simple, triangulated exactly.
+void CheckPart(const Polygon2& hull, double true_area, const std::string& what) {
+  EXPECT_NEAR(hull.area, true_area, 0.05 * true_area) << what;
   EXPECT_NEAR(SignedArea(hull.vertices), hull.area, 1e-12);  // counter-clockwise
   EXPECT_GT(hull.area, 0.0);
   EXPECT_TRUE(IsSimplePolygon(hull.vertices)) << what;
@@ -54,6 +52,15 @@ void CheckHull(const Points& points, double true_area, const std::string& what,
   EXPECT_NEAR(TriangulatedArea(hull.vertices), hull.area, 1e-9 * hull.area) << what;
   // Simplification keeps the outline small (a rectilinear shape needs few corners).
   EXPECT_LT(hull.vertices.size(), 60u) << what;
+}
+
+/// The samples of one region give one part, and the outline's area is that part's.
+void CheckHull(const Points& points, double true_area, const std::string& what,
+               const PolygonConfig& config = {}) {
+  const RegionOutline outline = ConcaveHull(points, config);
+  ASSERT_EQ(outline.parts.size(), 1u) << what;
+  EXPECT_EQ(outline.area, outline.parts[0].area);
+  CheckPart(outline.parts[0], true_area, what + " cell " + std::to_string(outline.cell_size));
 }
 
 TEST(ConcaveHull, LShapeAndNotchedRectangleAreasWithinFivePercent) {
@@ -66,26 +73,50 @@ TEST(ConcaveHull, LShapeAndNotchedRectangleAreasWithinFivePercent) {
 TEST(ConcaveHull, NotchIsResolved) {
   // A convex hull would report 6 m^2 for the notched rectangle; the concave hull must not contain
   // the notch's centre.
-  const Polygon2 hull = ConcaveHull(SampleRegion(InsideNotch, 3.0, 2.0, 20000, 5));
-  ASSERT_TRUE(hull.valid);
-  const Eigen::Vector2d notch_centre(1.5, 1.4);
-  // Winding test: a ray to +x crosses the outline an even number of times when outside.
-  int crossings = 0;
-  const auto& v = hull.vertices;
-  for (std::size_t i = 0; i < v.size(); ++i) {
-    const auto& a = v[i];
-    const auto& b = v[(i + 1) % v.size()];
-    if ((a.y() > notch_centre.y()) != (b.y() > notch_centre.y())) {
-      const double x = a.x() + (notch_centre.y() - a.y()) / (b.y() - a.y()) * (b.x() - a.x());
-      if (x > notch_centre.x()) ++crossings;
-    }
+  const RegionOutline hull = ConcaveHull(SampleRegion(InsideNotch, 3.0, 2.0, 20000, 5));
+  ASSERT_EQ(hull.parts.size(), 1u);
+  EXPECT_FALSE(PointInPolygon({1.5, 1.4}, hull.parts[0].vertices));  // the notch's centre
+  EXPECT_TRUE(PointInPolygon({0.5, 1.4}, hull.parts[0].vertices));
+  EXPECT_TRUE(PointInPolygon({1.5, 0.4}, hull.parts[0].vertices));
+}
+
+TEST(ConcaveHull, SeparateRegionsArePartsAndHolesAreFilled) {
+  // Three pieces of one plane metres apart (a floor seen along the walls): three parts, largest
+  // first, each with its own area.
+  Points pieces = SampleRegion([](const Eigen::Vector2d&) { return true; }, 2.0, 1.0, 8000, 11);
+  for (const auto& p :
+       SampleRegion([](const Eigen::Vector2d&) { return true; }, 1.0, 1.0, 4000, 12)) {
+    pieces.push_back(p + Eigen::Vector2d(4.0, 3.0));
   }
-  EXPECT_EQ(crossings % 2, 0);
+  for (const auto& p :
+       SampleRegion([](const Eigen::Vector2d&) { return true; }, 0.5, 1.0, 2000, 13)) {
+    pieces.push_back(p + Eigen::Vector2d(-3.0, 0.0));
+  }
+  const RegionOutline outline = ConcaveHull(pieces);
+  ASSERT_EQ(outline.parts.size(), 3u);
+  CheckPart(outline.parts[0], 2.0, "2 x 1 piece");
+  CheckPart(outline.parts[1], 1.0, "1 x 1 piece");
+  CheckPart(outline.parts[2], 0.5, "0.5 x 1 piece");
+  EXPECT_TRUE(PointInPolygon({4.5, 3.5}, outline.parts[1].vertices));
+  EXPECT_NEAR(outline.area, outline.parts[0].area + outline.parts[1].area + outline.parts[2].area,
+              1e-12);
+
+  // A 4 x 4 frame around an unseen 2 x 2 hole holding a 1 x 1 island: one part, the hole filled
+  // (outlines have no holes), the island inside it covered by that part.
+  const RegionOutline framed = ConcaveHull(SampleRegion(
+      [](const Eigen::Vector2d& p) {
+        const Eigen::Vector2d c = p - Eigen::Vector2d(2.0, 2.0);
+        const double r = c.cwiseAbs().maxCoeff();
+        return r > 1.0 || r < 0.5;
+      },
+      4.0, 4.0, 40000, 14));
+  ASSERT_EQ(framed.parts.size(), 1u);
+  CheckPart(framed.parts[0], 16.0, "frame with a hole and an island");
 }
 
 TEST(ConcaveHull, RotatedLatticeSamplesAndADisk) {
-  // Range-image-like regular sampling of a rotated 2 x 1 rectangle with a second, smaller blob that
-  // must be dropped (the largest region wins).
+  // Range-image-like regular sampling of a rotated 2 x 1 rectangle with a second, smaller blob: a
+  // part of its own, after the larger one.
   Points points;
   const double angle = 0.5;
   const Eigen::Rotation2Dd R(angle);
@@ -95,7 +126,11 @@ TEST(ConcaveHull, RotatedLatticeSamplesAndADisk) {
   for (double x = 5.0; x <= 5.3; x += 0.01) {
     for (double y = 5.0; y <= 5.3; y += 0.01) points.push_back({x, y});
   }
-  CheckHull(points, 2.0, "rotated lattice rectangle");
+  const RegionOutline two = ConcaveHull(points);
+  ASSERT_EQ(two.parts.size(), 2u);
+  CheckPart(two.parts[0], 2.0, "rotated lattice rectangle");
+  EXPECT_NEAR(two.parts[1].area, 0.3 * 0.3, 0.2 * 0.3 * 0.3);  // a few cells: coarser
+  EXPECT_TRUE(PointInPolygon({5.15, 5.15}, two.parts[1].vertices));
 
   Points disk;
   std::mt19937 rng(9);
@@ -104,29 +139,33 @@ TEST(ConcaveHull, RotatedLatticeSamplesAndADisk) {
     const Eigen::Vector2d p(u(rng), u(rng));
     if (p.squaredNorm() <= 1.0) disk.push_back(p + Eigen::Vector2d(100.0, -50.0));
   }
-  const Polygon2 hull = ConcaveHull(disk);
-  ASSERT_TRUE(hull.valid);
+  const RegionOutline hull = ConcaveHull(disk);
+  ASSERT_EQ(hull.parts.size(), 1u);
   EXPECT_NEAR(hull.area, M_PI, 0.05 * M_PI);
-  EXPECT_TRUE(IsSimplePolygon(hull.vertices));
+  EXPECT_TRUE(IsSimplePolygon(hull.parts[0].vertices));
 }
 
 TEST(ConcaveHull, DeterministicAndDegenerateInputs) {
   const Points points = SampleRegion(InsideL, 4.0, 3.0, 10000, 6);
-  const Polygon2 a = ConcaveHull(points);
-  const Polygon2 b = ConcaveHull(points);
-  EXPECT_EQ(a.vertices, b.vertices);
+  const RegionOutline a = ConcaveHull(points);
+  const RegionOutline b = ConcaveHull(points);
+  ASSERT_EQ(a.parts.size(), 1u);
+  ASSERT_EQ(b.parts.size(), 1u);
+  EXPECT_EQ(a.parts[0].vertices, b.parts[0].vertices);
 
-  EXPECT_FALSE(ConcaveHull({}).valid);
-  EXPECT_FALSE(ConcaveHull({{0, 0}, {1, 1}}).valid);
+  EXPECT_FALSE(ConcaveHull({}).valid());
+  EXPECT_FALSE(ConcaveHull({{0, 0}, {1, 1}}).valid());
   Points line;
   for (int i = 0; i < 1000; ++i) line.push_back({0.001 * i, 0.002 * i});
-  EXPECT_FALSE(ConcaveHull(line).valid);
+  EXPECT_FALSE(ConcaveHull(line).valid());
   Points same(500, Eigen::Vector2d(1, 2));
-  EXPECT_FALSE(ConcaveHull(same).valid);
+  EXPECT_FALSE(ConcaveHull(same).valid());
   // Non-finite points are ignored.
   Points with_nan = points;
   with_nan.push_back({std::nan(""), 0.0});
-  EXPECT_EQ(ConcaveHull(with_nan).vertices, a.vertices);
+  const RegionOutline c = ConcaveHull(with_nan);
+  ASSERT_EQ(c.parts.size(), 1u);
+  EXPECT_EQ(c.parts[0].vertices, a.parts[0].vertices);
 
   PolygonConfig bad;
   bad.cell_size = -1;
@@ -137,10 +176,11 @@ TEST(ConcaveHull, ExplicitCellAndNoSimplification) {
   PolygonConfig config;
   config.cell_size = 0.05;
   config.simplify_tolerance = -1.0;  // raw marching squares outline
-  const Polygon2 hull = ConcaveHull(SampleRegion(InsideL, 4.0, 3.0, 20000, 8), config);
-  ASSERT_TRUE(hull.valid);
+  const RegionOutline outline = ConcaveHull(SampleRegion(InsideL, 4.0, 3.0, 20000, 8), config);
+  ASSERT_EQ(outline.parts.size(), 1u);
   // The cell is stretched per axis to fit the extent (by well under 2% here).
-  EXPECT_NEAR(hull.cell_size, 0.05, 0.02 * 0.05);
+  EXPECT_NEAR(outline.cell_size, 0.05, 0.02 * 0.05);
+  const Polygon2& hull = outline.parts[0];
   EXPECT_NEAR(hull.area, 7.0, 0.05 * 7.0);
   EXPECT_GT(hull.vertices.size(), 100u);
   EXPECT_TRUE(IsSimplePolygon(hull.vertices));

@@ -18,13 +18,17 @@
 namespace planeslam::mapping {
 namespace {
 
-/// A map of two patches seen from the origin: a 2 x 1 m patch at z = 3 and a 1 x 1 m patch at
-/// x = 1.5 (both from grid points), through PlaneMap and MakeMapRecords.
+/// A map of two planes seen from the origin: at z = 3 a 2 x 1 m patch and a 0.6 x 1 m patch 2 m
+/// beside it (one plane, two outline parts), and a 1 x 1 m patch at x = 1.5 (all from grid
+/// points), through PlaneMap and MakeMapRecords.
 std::vector<MapPlaneRecord> MapRecords() {
   std::vector<detection::Plane> planes(2);
   std::vector<std::vector<Eigen::Vector3f>> points(2);
   for (int i = 0; i < 100; ++i) {
     for (int j = 0; j < 50; ++j) points[0].emplace_back(-1.0f + 0.02f * i, -0.5f + 0.02f * j, 3.0f);
+  }
+  for (int i = 0; i < 30; ++i) {
+    for (int j = 0; j < 50; ++j) points[0].emplace_back(3.0f + 0.02f * i, -0.5f + 0.02f * j, 3.0f);
   }
   for (int i = 0; i < 50; ++i) {
     for (int j = 0; j < 50; ++j) points[1].emplace_back(1.5f, -0.5f + 0.02f * i, 1.0f + 0.02f * j);
@@ -40,18 +44,23 @@ std::vector<MapPlaneRecord> MapRecords() {
   map.AddObservations(0, Pose::Identity(), planes, points);
   auto records = MakeMapRecords(map);
   EXPECT_EQ(records.size(), 2u);
+  EXPECT_EQ(records[0].polygons.size(), 2u);
   return records;
 }
 
 std::size_t FaceCount(const std::vector<MapPlaneRecord>& records) {
   std::size_t n = 0;
-  for (const auto& r : records) n += r.triangles.size();
+  for (const auto& r : records) {
+    for (const auto& part : r.triangles) n += part.size();
+  }
   return n;
 }
 
 std::size_t VertexCount(const std::vector<MapPlaneRecord>& records) {
   std::size_t n = 0;
-  for (const auto& r : records) n += r.polygon.size();
+  for (const auto& r : records) {
+    for (const auto& part : r.polygons) n += part.size();
+  }
   return n;
 }
 
@@ -70,16 +79,18 @@ void ExpectMesh(const pcl::PolygonMesh& mesh, const std::vector<MapPlaneRecord>&
   ASSERT_EQ(cloud.size(), VertexCount(records));
   std::size_t v = 0;
   for (const auto& r : records) {
-    for (const auto& p : r.polygon) {
-      EXPECT_NEAR(cloud[v].x, p.x(), 1e-5);
-      EXPECT_NEAR(cloud[v].y, p.y(), 1e-5);
-      EXPECT_NEAR(cloud[v].z, p.z(), 1e-5);
-      if (check_colors) {
-        EXPECT_EQ(cloud[v].r, r.color[0]);
-        EXPECT_EQ(cloud[v].g, r.color[1]);
-        EXPECT_EQ(cloud[v].b, r.color[2]);
+    for (const auto& part : r.polygons) {
+      for (const auto& p : part) {
+        EXPECT_NEAR(cloud[v].x, p.x(), 1e-5);
+        EXPECT_NEAR(cloud[v].y, p.y(), 1e-5);
+        EXPECT_NEAR(cloud[v].z, p.z(), 1e-5);
+        if (check_colors) {
+          EXPECT_EQ(cloud[v].r, r.color[0]);
+          EXPECT_EQ(cloud[v].g, r.color[1]);
+          EXPECT_EQ(cloud[v].b, r.color[2]);
+        }
+        ++v;
       }
-      ++v;
     }
   }
   for (const auto& poly : mesh.polygons) {
@@ -129,8 +140,10 @@ TEST(MapFiles, JsonParsesWithTheWrittenValues) {
     EXPECT_EQ(p.at("d").get<double>(), records[i].d);  // exact round trip
     EXPECT_EQ(p.at("normal")[2].get<double>(), records[i].normal.z());
     EXPECT_EQ(p.at("area").get<double>(), records[i].area);
-    ASSERT_EQ(p.at("polygon").size(), records[i].polygon.size());
-    EXPECT_EQ(p.at("polygon")[0][1].get<double>(), records[i].polygon[0].y());
+    ASSERT_EQ(p.at("polygons").size(), records[i].polygons.size());
+    ASSERT_EQ(p.at("polygons")[0].size(), records[i].polygons[0].size());
+    EXPECT_EQ(p.at("polygons")[0][0][1].get<double>(), records[i].polygons[0][0].y());
+    EXPECT_EQ(p.at("polygons").back().size(), records[i].polygons.back().size());
     EXPECT_EQ(p.at("observations").get<int>(), 1);
   }
 }

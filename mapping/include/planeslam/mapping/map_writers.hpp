@@ -5,14 +5,16 @@
 ///
 /// Formats:
 ///  - plane_map.ply: binary_little_endian (or ascii) 1.0, `element vertex` (float x y z, uchar red
-///    green blue), `element face` (list uchar int vertex_indices): the ear-clipped outline of each
-///    plane, all its vertices in the plane's colour. Opens in MeshLab, CloudCompare, PCL.
+///    green blue), `element face` (list uchar int vertex_indices): the ear-clipped outline parts of
+///    each plane, all their vertices in the plane's colour. Opens in MeshLab, CloudCompare, PCL.
 ///  - plane_map.obj: `o plane_<id>` per plane, `v x y z r g b` (colour in [0, 1], the extension
 ///    MeshLab and CloudCompare read; other readers ignore the extra numbers), `f a b c` (1-based).
-///  - plane_map.json: {"format": "planeslam-plane-map", "version": 1, "frame": "world",
+///  - plane_map.json: {"format": "planeslam-plane-map", "version": 2, "frame": "world",
 ///    "planes": [{id, normal, d, centroid, area, observed_area, point_count, rms, observations,
-///    first_frame, last_frame, color, polygon: [[x, y, z], ...]}]} (metres; the normal points away
-///    from the sensors that saw the plane; the polygon is counter-clockwise about the normal).
+///    first_frame, last_frame, color, polygons: [[[x, y, z], ...], ...]}]} (metres; the normal
+///    points away from the sensors that saw the plane; one polygon per separate part of the plane,
+///    largest first, each counter-clockwise about the normal; area is their sum). Version 1 had a
+///    single "polygon" (the largest part only).
 /// Mesh faces are wound counter-clockwise as seen by the observers (right-hand face normal =
 /// -normal), so viewers with back-face culling show each plane from the side it was seen from.
 #include <Eigen/Core>
@@ -34,10 +36,12 @@ struct MapPlaneRecord {
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();   ///< unit, world
   double d = 0.0;                                      ///< n . p = d [m]
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();  ///< [m]
-  std::vector<Eigen::Vector3d> polygon;       ///< outline vertices, world [m]; may be empty
-  std::vector<std::array<int, 3>> triangles;  ///< indices into polygon
-  double area = 0.0;                          ///< outline area [m^2]
-  double observed_area = 0.0;                 ///< observed area (holes excluded) [m^2]
+  /// Outline: one polygon per separate part, world [m]; empty when the plane has no outline.
+  std::vector<std::vector<Eigen::Vector3d>> polygons;
+  /// Per part: triangles as indices into that part's polygon.
+  std::vector<std::vector<std::array<int, 3>>> triangles;
+  double area = 0.0;           ///< outline area, all parts [m^2]
+  double observed_area = 0.0;  ///< observed area (holes excluded) [m^2]
   std::int64_t point_count = 0;
   double rms = 0.0;  ///< sqrt(mse) of the fit [m]
   int observations = 0;

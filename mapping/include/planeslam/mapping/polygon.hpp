@@ -12,16 +12,17 @@
 ///  2. Smooth the binary occupancy with a 3x3 box filter. Small gaps of the sampling (an empty cell
 ///     among occupied ones) stay inside; isolated outlier cells fall below the iso level.
 ///  3. Marching squares at iso level 11/18 on the smoothed field. On a straight edge the last
-///  occupied
-///     cell has smoothed value 6/9 and the next 3/9, so the contour passes 1/6 cell outside the
-///     centre of the boundary cells: close to the true edge, which lies uniformly within those
-///     cells (an outline along the cells' outer edges would overestimate the area by half a cell
-///     times the perimeter). 11/18 lies strictly between the possible values 5/9 and 6/9, so the
-///     contour never passes through a sample and is a set of disjoint simple closed curves.
-///  4. Keep the curve enclosing the largest area (the outer boundary of the largest region; holes
-///  and
-///     smaller separate regions are dropped), make it counter-clockwise, simplify it with
-///     Douglas-Peucker, and fall back to a smaller tolerance if simplification made it non-simple.
+///     occupied cell has smoothed value 6/9 and the next 3/9, so the contour passes 1/6 cell
+///     outside the centre of the boundary cells: close to the true edge, which lies uniformly
+///     within those cells (an outline along the cells' outer edges would overestimate the area by
+///     half a cell times the perimeter). 11/18 lies strictly between the possible values 5/9 and
+///     6/9, so the contour never passes through a sample and is a set of disjoint simple closed
+///     curves.
+///  4. Keep the outer boundary of every separate region (a curve inside no other curve): holes
+///     (unseen parts inside a region) are filled, and regions inside holes are then covered by
+///     their surroundings. Make each counter-clockwise, simplify it with Douglas-Peucker, and fall
+///     back to a smaller tolerance if simplification made it non-simple.
+/// A plane seen in separate pieces (a floor seen only along the walls) so keeps every piece.
 #include <Eigen/Core>
 #include <array>
 #include <cstddef>
@@ -64,15 +65,27 @@ struct PolygonConfig {
 /// A simple polygon, counter-clockwise, without the first vertex repeated at the end.
 struct Polygon2 {
   std::vector<Eigen::Vector2d> vertices;
-  double area = 0.0;       ///< [m^2] shoelace area (>= 0)
-  double cell_size = 0.0;  ///< [m] cell used by ConcaveHull (geometric mean of its sides)
-  bool valid = false;      ///< false when the points did not give a region (too few, degenerate)
+  double area = 0.0;  ///< [m^2] shoelace area (> 0)
 };
 
-/// Concave hull of dense samples of a planar region (method in the file comment).
-/// Returns valid = false (no exception) for fewer than 3 finite points or a degenerate region.
-/// CheckError when `config` is invalid.
-Polygon2 ConcaveHull(const std::vector<Eigen::Vector2d>& points, const PolygonConfig& config = {});
+/// The outline of a planar region: one simple polygon per separate part, holes filled.
+struct RegionOutline {
+  std::vector<Polygon2> parts;  ///< largest first; disjoint, none inside another
+  double area = 0.0;            ///< sum of the parts' areas [m^2]
+  double cell_size = 0.0;       ///< [m] cell used by ConcaveHull (geometric mean of its sides)
+
+  /// False when the points did not give a region (too few, degenerate).
+  bool valid() const { return !parts.empty(); }
+};
+
+/// Concave hull of dense samples of a planar region, one polygon per separate part (method in the
+/// file comment). Returns no parts (no exception) for fewer than 3 finite points or a degenerate
+/// region. CheckError when `config` is invalid.
+RegionOutline ConcaveHull(const std::vector<Eigen::Vector2d>& points,
+                          const PolygonConfig& config = {});
+
+/// True when p lies inside the closed polygon (even-odd rule; either orientation).
+bool PointInPolygon(const Eigen::Vector2d& p, const std::vector<Eigen::Vector2d>& polygon);
 
 /// Signed shoelace area: > 0 for counter-clockwise vertices [m^2].
 double SignedArea(const std::vector<Eigen::Vector2d>& polygon);
