@@ -88,4 +88,15 @@ PLANESLAM_REGISTER_CONFIG_SECTION(RunConfig, "run", "planeslam run: inputs and o
                                   &VisitRun);
 
 }  // namespace
+
+std::unique_ptr<mapping::SlamSystem> MakeSlamSystem(const Config& config) {
+  return std::make_unique<mapping::SlamSystem>(
+      config.Get<mapping::SlamConfig>("slam"),
+      config.Get<registration::AssociationConfig>("association"),
+      config.Get<registration::RegistrationConfig>("registration"),
+      config.Get<registration::PointToPlaneConfig>("point_to_plane"),
+      config.Get<mapping::PoseGraphConfig>("pose_graph"),
+      config.Get<mapping::PlaneMapConfig>("plane_map"));
+}
+
 }  // namespace planeslam::app

@@ -1,5 +1,6 @@
 #pragma once
 /// Config sections "slam" (mapping::SlamConfig) and "run" (RunConfig below).
+#include <memory>
 #include <string>
 
 #include "config.hpp"
@@ -9,10 +10,14 @@ namespace planeslam::app {
 
 /// What `planeslam run` feeds the SLAM system and which optional outputs it writes.
 struct RunConfig {
-  bool start_at_ground_truth = true;  ///< first pose = ground truth's when known
-  int max_frames = 0;                 ///< [frames] 0 = all
-  int frame_stride = 1;               ///< [frames]
+  bool start_at_ground_truth = true;      ///< first pose = ground truth's when known
+  int max_frames = 0;                     ///< [frames] 0 = all
+  int frame_stride = 1;                   ///< [frames]
   double ate_max_time_difference = 0.01;  ///< [s] evo's default t_max_diff
 };
+
+/// The SLAM system configured from `config`'s sections slam, association, registration,
+/// point_to_plane, pose_graph and plane_map (as `planeslam run` uses it).
+std::unique_ptr<mapping::SlamSystem> MakeSlamSystem(const Config& config);
 
 }  // namespace planeslam::app

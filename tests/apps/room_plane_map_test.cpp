@@ -12,12 +12,11 @@
 #include <vector>
 
 #include "config.hpp"
+#include "config_sections_slam.hpp"
 #include "config_sections_synthetic.hpp"
 #include "detector_factory.hpp"
 #include "mapping/covered_cells.hpp"
 #include "planeslam/datasets/synthetic_sequence.hpp"
-#include "planeslam/mapping/slam_system.hpp"
-#include "planeslam/registration/plane_association.hpp"
 
 namespace planeslam::test {
 namespace {
@@ -48,12 +47,8 @@ TEST(RoomPlaneMap, EveryLargeScenePlaneIsMappedOnceWithItsVisibleArea) {
   const auto sequence = app::MakeSyntheticSequence("room", config);
   const auto detector =
       app::MakeDetector(config.Get<app::DetectionSection>("detection").method, config);
-  mapping::SlamSystem slam(config.Get<mapping::SlamConfig>("slam"),
-                           config.Get<registration::AssociationConfig>("association"),
-                           config.Get<registration::RegistrationConfig>("registration"),
-                           config.Get<registration::PointToPlaneConfig>("point_to_plane"),
-                           config.Get<mapping::PoseGraphConfig>("pose_graph"),
-                           config.Get<mapping::PlaneMapConfig>("plane_map"));
+  const std::unique_ptr<mapping::SlamSystem> slam_system = app::MakeSlamSystem(config);
+  mapping::SlamSystem& slam = *slam_system;
   slam.SetInitialPose(*sequence->GroundTruth(0));
   // Ground truth of what was seen: every pixel labelled with a scene plane, at its true position,
   // in 2 cm cells of the plane's own 2D coordinates.
