@@ -70,6 +70,10 @@ void VisitPlaneMap(FieldVisitor& v, mapping::PlaneMapConfig& c) {
   v.Field("merge_across_gaps", c.merge_across_gaps,
           "in the finished map, merge map planes within the merge thresholds even when their "
           "extents are apart (one plane seen in separate parts; the outline keeps each part)");
+  v.Field("refit_merge_across_gaps_offset", c.refit_merge_across_gaps_offset,
+          "[m] during SLAM, map planes whose extents are apart merge (one landmark) when each "
+          "centroid lies within this of the other plane; 0 = only touching planes merge",
+          0.0, 100.0);
   v.Field("min_observation_points", c.min_observation_points,
           "[points] detected planes with fewer points are not added to the map", 3, 100000000);
   v.Field("sample_cell_size", c.sample_cell_size,

@@ -156,6 +156,7 @@ std::vector<std::string> PlaneMapConfig::Validate() const {
   need(merge_max_normal_angle_deg > 0 && merge_max_normal_angle_deg < 90,
        "merge_max_normal_angle_deg must be in (0, 90)");
   need(merge_max_offset > 0, "merge_max_offset must be > 0");
+  need(refit_merge_across_gaps_offset >= 0, "refit_merge_across_gaps_offset must be >= 0");
   need(min_observation_points >= 3, "min_observation_points must be >= 3");
   need(sample_cell_size > 0, "sample_cell_size must be > 0");
   need(max_samples_per_observation >= 16, "max_samples_per_observation must be >= 16");
@@ -301,13 +302,14 @@ int PlaneMap::CountTouching(const Extent& extent, const std::vector<Eigen::Vecto
   return touching;
 }
 
-bool PlaneMap::Coincide(const MapPlane& a, const MapPlane& b, bool across_gaps) const {
+bool PlaneMap::Coincide(const MapPlane& a, const MapPlane& b, double across_gaps_offset) const {
   if (a.normal.dot(b.normal) < std::cos(config_.merge_max_normal_angle_deg * kDegToRad)) {
     return false;
   }
-  if (std::abs(a.normal.dot(b.centroid) - a.d) > config_.merge_max_offset) return false;
-  if (std::abs(b.normal.dot(a.centroid) - b.d) > config_.merge_max_offset) return false;
-  if (across_gaps) return true;
+  const double offset =
+      std::max(std::abs(a.normal.dot(b.centroid) - a.d), std::abs(b.normal.dot(a.centroid) - b.d));
+  if (offset > config_.merge_max_offset) return false;
+  if (offset <= across_gaps_offset) return true;  // one surface whatever the gap
   // Touching: b's occupied cells (as world points) near a's extent.
   const Extent& eb = extents_[IndexOf(b.id)];
   std::vector<Eigen::Vector3d> cells;
@@ -528,18 +530,18 @@ int PlaneMap::Refit(const std::unordered_map<std::int64_t, Pose>& T_world_keyfra
   }
   for (auto& plane : planes_) RefitPlane(plane);
   for (const auto& plane : planes_) RebuildExtent(plane);
-  return MergeCoincidentPlanes();
+  return MergeCoincidentPlanes(config_.refit_merge_across_gaps_offset);
 }
 
-int PlaneMap::MergeCoincidentPlanes(bool across_gaps) {
+int PlaneMap::MergeCoincidentPlanes(double across_gaps_offset) {
   int merges = 0;
   bool changed = true;
   while (changed) {
     changed = false;
     for (std::size_t i = 0; i < planes_.size() && !changed; ++i) {
       for (std::size_t j = i + 1; j < planes_.size() && !changed; ++j) {
-        if (Coincide(planes_[i], planes_[j], across_gaps) ||
-            Coincide(planes_[j], planes_[i], across_gaps)) {
+        if (Coincide(planes_[i], planes_[j], across_gaps_offset) ||
+            Coincide(planes_[j], planes_[i], across_gaps_offset)) {
           const bool i_first = planes_[i].id < planes_[j].id;
           MergeInto(i_first ? i : j, i_first ? j : i);
           ++merges;

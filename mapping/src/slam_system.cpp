@@ -330,8 +330,12 @@ PoseGraphResult SlamSystem::Finish() {
   const auto start = std::chrono::steady_clock::now();
   PoseGraphResult result;
   if (!graph_.edges().empty()) result = Optimize();
-  // The poses are final: coplanar parts now become one plane (not before, see merge_across_gaps).
-  map_.MergeCoincidentPlanes(map_.config().merge_across_gaps);
+  // The poses are final: coplanar parts become one plane at the loose merge offset (during SLAM
+  // only at the tight one, see refit_merge_across_gaps_offset).
+  const PlaneMapConfig& map_config = map_.config();
+  map_.MergeCoincidentPlanes(map_config.merge_across_gaps
+                                 ? map_config.merge_max_offset
+                                 : map_config.refit_merge_across_gaps_offset);
   stats_.time_optimize_ms += ElapsedMs(start);
   return result;
 }

@@ -297,11 +297,11 @@ TEST(PlaneMap, SamplesGrowWithAreaNotWithKeyframes) {
   EXPECT_GT(map.WorldSamples(map.planes()[0]).size(), first * 18 / 10);
 }
 
-TEST(PlaneMap, CoplanarDistantPlanesStayApartUntilTheFinishedMapJoinsThemAsParts) {
-  // Two table tops at the same height 3 m apart, seen by two keyframes.
+TEST(PlaneMap, DistantPlanesMergeAsPartsOfOnePlaneWithinTheOffsetAskedFor) {
+  // Two table tops 3 m apart, at heights 0.70 and 0.73 m, seen by two keyframes.
   const std::vector<Rect> rects = {
-      {{0, 0, 0.7}, {1, 0, 0}, {0, 1, 0}},
-      {{4, 0, 0.7}, {1, 0, 0}, {0, 1, 0}},
+      {{0, 0, 0.70}, {1, 0, 0}, {0, 1, 0}},
+      {{4, 0, 0.73}, {1, 0, 0}, {0, 1, 0}},
   };
   std::mt19937 rng(3);
   PlaneMap map;
@@ -316,11 +316,13 @@ TEST(PlaneMap, CoplanarDistantPlanesStayApartUntilTheFinishedMapJoinsThemAsParts
   // Association is local: the second top does not join the first one's map plane.
   EXPECT_EQ(map.AddObservations(1, T_top, f2.planes, f2.points).created, 1);
   ASSERT_EQ(map.size(), 2u);
-  EXPECT_EQ(map.MergeCoincidentPlanes(), 0);  // they do not touch
-  // The finished map: one plane z = 0.7, its outline in two parts of 1 m^2 each.
-  EXPECT_EQ(map.MergeCoincidentPlanes(/*across_gaps=*/true), 1);
+  EXPECT_EQ(map.MergeCoincidentPlanes(), 0);      // they do not touch
+  EXPECT_EQ(map.MergeCoincidentPlanes(0.02), 0);  // 3 cm apart: two surfaces (SLAM's default)
+  // Within 5 cm (the finished map's default): one plane between the two, two outline parts.
+  EXPECT_EQ(map.MergeCoincidentPlanes(0.05), 1);
   ASSERT_EQ(map.size(), 1u);
-  EXPECT_NEAR(std::abs(map.planes()[0].d), 0.7, 0.005);
+  EXPECT_NEAR(map.planes()[0].centroid.z(), 0.715, 0.005);
+  EXPECT_GT(std::abs(map.planes()[0].normal.z()), std::cos(1.0 * M_PI / 180));
   const MapPlaneOutline outline = map.Outline(map.planes()[0]);
   ASSERT_EQ(outline.region.parts.size(), 2u);
   for (const Polygon2& part : outline.region.parts) EXPECT_NEAR(part.area, 1.0, 0.15);
