@@ -1,12 +1,13 @@
 // `planeslam run [SEQUENCE]`: offline plane SLAM over a sequence (or the built-in synthetic room),
 // writing the trajectory, the plane map, the pose graph, an optional OctoMap and, with ground
 // truth, its own scores.
+#include <nlohmann/json.hpp>
+
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
 #include <memory>
-#include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "cli_common.hpp"
@@ -39,8 +40,8 @@ double MsSince(Clock::time_point t) {
 }
 
 nlohmann::json StatsJson(const ds::ErrorStatistics& s, std::size_t pairs) {
-  return {{"rmse", s.rmse}, {"mean", s.mean}, {"median", s.median}, {"std", s.std},
-          {"min", s.min},   {"max", s.max},   {"sse", s.sse},       {"pairs", pairs}};
+  return {{"rmse", s.rmse}, {"mean", s.mean},     {"median", s.median}, {"std", s.std},
+          {"min", s.min},   {"max", s.max},       {"sse", s.sse},       {"pairs", pairs}};
 }
 
 class RunCommand : public Command {
@@ -55,15 +56,13 @@ class RunCommand : public Command {
     sub.add_option("SEQUENCE", sequence_,
                    "TUM or ICL-NUIM folder, folder of organized .pcd, or KITTI .bin folder; "
                    "omitted: the synthetic scene of the 'simulation' config section");
-    sub.add_option("-o,--out", out_dir_,
-                   "output folder (default: output.directory, planeslam_out)");
+    sub.add_option("-o,--out", out_dir_, "output folder (default: output.directory, planeslam_out)");
     sub.add_option("--scene", scene_, "synthetic scene when no SEQUENCE: room, corridor, rubble");
     sub.add_option("--method", method_, "plane detector (default: detection.method)");
     AddConfigOptions(sub, options_);
     sub.footer(
         "Outputs: trajectory_tum.txt trajectory_kitti.txt plane_map.{ply,obj,json} pose_graph.g2o\n"
-        "         octomap.bt (octomap.enabled) config.yaml summary.json frames.csv, and with "
-        "ground truth metrics.json + "
+        "         octomap.bt (octomap.enabled) config.yaml summary.json frames.csv, and with ground truth metrics.json + "
         "plots/*.svg\n"
         "Ctrl-C stops after the current frame and writes the outputs of the frames done.\n\n"
         "Examples:\n"
@@ -135,8 +134,8 @@ class RunCommand : public Command {
       const mapping::SlamFrameResult result =
           slam.ProcessFrame(frame.timestamp, frame.cloud, segmentation);
       if (frame.T_world_sensor_gt) ground_truth.Add(frame.timestamp, *frame.T_world_sensor_gt);
-      frame_log << i << "," << ds::FormatRoundTrip(frame.timestamp) << "," << result.keyframe << ","
-                << result.planes << "," << result.matches << "," << result.tracked << ","
+      frame_log << i << "," << ds::FormatRoundTrip(frame.timestamp) << "," << result.keyframe
+                << "," << result.planes << "," << result.matches << "," << result.tracked << ","
                 << result.degenerate << "," << result.used_point_to_plane << ","
                 << result.loop_closures << "," << result.refused << "\n";
       if (want_octomap && result.keyframe) {
@@ -187,35 +186,36 @@ class RunCommand : public Command {
       ate_line = os.str();
     }
     const mapping::SlamStats& stats = slam.stats();
-    nlohmann::json summary = {{"input", input_name},
-                              {"frames", done},
-                              {"interrupted", interrupted},
-                              {"keyframes", stats.keyframes},
-                              {"loop_closures", stats.loop_closures},
-                              {"loop_candidates", stats.loop_candidates},
-                              {"loop_refused",
-                               {{"degenerate", stats.loop_refused_degenerate},
-                                {"matches", stats.loop_refused_matches},
-                                {"residual", stats.loop_refused_residual}}},
-                              {"refused_frames", stats.refused_frames},
-                              {"degenerate_frames", stats.degenerate_frames},
-                              {"point_to_plane_frames", stats.point_to_plane_frames},
-                              {"untracked_frames", stats.untracked_frames},
-                              {"map_planes", slam.map().size()},
-                              {"final_optimization",
-                               {{"initial_cost", final_optimization.initial_cost},
-                                {"final_cost", final_optimization.final_cost},
-                                {"iterations", final_optimization.iterations},
-                                {"converged", final_optimization.converged}}},
-                              {"time_ms",
-                               {{"load", time_load},
-                                {"detect", time_detect},
-                                {"track", stats.time_tracking_ms},
-                                {"map", stats.time_map_ms},
-                                {"loop", stats.time_loop_ms},
-                                {"optimize", stats.time_optimize_ms + time_finish},
-                                {"write", MsSince(t)}}},
-                              {"frames_per_second", done / std::max(wall_seconds, 1e-9)}};
+    nlohmann::json summary = {
+        {"input", input_name},
+        {"frames", done},
+        {"interrupted", interrupted},
+        {"keyframes", stats.keyframes},
+        {"loop_closures", stats.loop_closures},
+        {"loop_candidates", stats.loop_candidates},
+        {"loop_refused",
+         {{"degenerate", stats.loop_refused_degenerate},
+          {"matches", stats.loop_refused_matches},
+          {"residual", stats.loop_refused_residual}}},
+        {"refused_frames", stats.refused_frames},
+        {"degenerate_frames", stats.degenerate_frames},
+        {"point_to_plane_frames", stats.point_to_plane_frames},
+        {"untracked_frames", stats.untracked_frames},
+        {"map_planes", slam.map().size()},
+        {"final_optimization",
+         {{"initial_cost", final_optimization.initial_cost},
+          {"final_cost", final_optimization.final_cost},
+          {"iterations", final_optimization.iterations},
+          {"converged", final_optimization.converged}}},
+        {"time_ms",
+         {{"load", time_load},
+          {"detect", time_detect},
+          {"track", stats.time_tracking_ms},
+          {"map", stats.time_map_ms},
+          {"loop", stats.time_loop_ms},
+          {"optimize", stats.time_optimize_ms + time_finish},
+          {"write", MsSince(t)}}},
+        {"frames_per_second", done / std::max(wall_seconds, 1e-9)}};
     if (!metrics.is_null()) summary["metrics"] = metrics;
     ds::WriteFileAtomic(out_dir + "/summary.json", summary.dump(2) + "\n");
     if (!metrics.is_null()) ds::WriteFileAtomic(out_dir + "/metrics.json", metrics.dump(2) + "\n");
@@ -250,8 +250,8 @@ class RunCommand : public Command {
     ds::ApeOptions ape_options;
     ape_options.association.max_diff = run.ate_max_time_difference;
     ape_options.alignment.align = true;
-    const ds::ApeResult ape =
-        ds::EvaluateApe(ground_truth, estimate, ape_options, "ground truth", "trajectory_tum.txt");
+    const ds::ApeResult ape = ds::EvaluateApe(ground_truth, estimate, ape_options,
+                                              "ground truth", "trajectory_tum.txt");
     nlohmann::json metrics;
     if (!ape.ok) return {{"error", ape.message}};
     metrics["ate"] = StatsJson(ape.stats, ape.pairs.size());
@@ -263,10 +263,8 @@ class RunCommand : public Command {
     const ds::RpeResult rpe_t = ds::EvaluateRpe(ground_truth, estimate, rpe_options);
     rpe_options.relation = ds::PoseRelation::kRotationAngleDeg;
     const ds::RpeResult rpe_r = ds::EvaluateRpe(ground_truth, estimate, rpe_options);
-    if (rpe_t.ok)
-      metrics["rpe_translation_m_per_frame"] = StatsJson(rpe_t.stats, rpe_t.errors.size());
-    if (rpe_r.ok)
-      metrics["rpe_rotation_deg_per_frame"] = StatsJson(rpe_r.stats, rpe_r.errors.size());
+    if (rpe_t.ok) metrics["rpe_translation_m_per_frame"] = StatsJson(rpe_t.stats, rpe_t.errors.size());
+    if (rpe_r.ok) metrics["rpe_rotation_deg_per_frame"] = StatsJson(rpe_r.stats, rpe_r.errors.size());
     EnsureDirectory(out_dir + "/plots");
     PlotTrajectories(out_dir + "/plots/trajectories.svg",
                      "planeslam run: trajectories, top view (SE(3) aligned)", ape.ref_poses,
