@@ -45,6 +45,12 @@ void ExpectCompleteOutputs(const fs::path& out, std::size_t frames, bool octomap
   const datasets::Trajectory trajectory =
       datasets::ReadTumTrajectory((out / "trajectory_tum.txt").string());
   EXPECT_EQ(trajectory.size(), frames);
+  // The TUM file opens in `planeslam eval` (against itself: every pose pairs, error 0).
+  const std::string tum = (out / "trajectory_tum.txt").string();
+  const CliResult eval = RunCli("eval ape " + tum + " " + tum, out);
+  EXPECT_EQ(eval.exit_code, 0) << eval.err;
+  EXPECT_NE(eval.out.find("pairs\t" + std::to_string(frames)), std::string::npos) << eval.out;
+  EXPECT_NE(eval.out.find("rmse\t0.000000"), std::string::npos) << eval.out;
   // frames.csv: a header and one row per frame.
   EXPECT_EQ(CountLines(Slurp(out / "frames.csv")), frames + 1);
   const auto map = nlohmann::json::parse(Slurp(out / "plane_map.json"));
