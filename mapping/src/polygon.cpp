@@ -486,11 +486,15 @@ RegionOutline ConcaveHull(const std::vector<Eigen::Vector2d>& points, const Poly
   const double tolerance = config.simplify_tolerance == 0.0
                                ? kAutoToleranceCells * grid.size.minCoeff()
                                : config.simplify_tolerance;
+  // A ring can lie only inside a ring enclosing more area: only those are tested.
+  std::vector<double> ring_area(rings.size());
+  for (std::size_t i = 0; i < rings.size(); ++i) ring_area[i] = std::abs(SignedArea(rings[i]));
   for (std::size_t i = 0; i < rings.size(); ++i) {
     if (rings[i].size() < 3) continue;
     bool nested = false;
     for (std::size_t j = 0; j < rings.size() && !nested; ++j) {
-      nested = j != i && rings[j].size() >= 3 && PointInPolygon(rings[i].front(), rings[j]);
+      nested = ring_area[j] > ring_area[i] && rings[j].size() >= 3 &&
+               PointInPolygon(rings[i].front(), rings[j]);
     }
     if (nested) continue;
     Polygon2 part = SimplifiedPart(rings[i], tolerance);

@@ -75,7 +75,13 @@ TEST(RoomPlaneMap, EveryLargeScenePlaneIsMappedOnceWithItsVisibleArea) {
   }
   slam.Finish();
 
-  std::map<int, std::vector<int>> mapped;  // scene plane id -> map planes on it
+  // Each map plane on a scene plane, with its match and its outline's area.
+  struct OnScenePlane {
+    int map_id;
+    Match match;
+    double area;
+  };
+  std::map<int, std::vector<OnScenePlane>> mapped;  // by scene plane id
   for (const mapping::MapPlaneOutline& outline : slam.map().Outlines()) {
     const mapping::MapPlane* plane = slam.map().Find(outline.id);
     ASSERT_NE(plane, nullptr);
@@ -84,7 +90,9 @@ TEST(RoomPlaneMap, EveryLargeScenePlaneIsMappedOnceWithItsVisibleArea) {
                 outline.id, outline.region.area, plane->observations.size(), match.scene_id,
                 match.angle_deg, 1e3 * match.offset);
     // A plane without an outline (seen too little for one) is not drawn in the map's meshes.
-    if (match.scene_id != 0 && outline.region.valid()) mapped[match.scene_id].push_back(outline.id);
+    if (match.scene_id != 0 && outline.region.valid()) {
+      mapped[match.scene_id].push_back({outline.id, match, outline.region.area});
+    }
     if (outline.region.area >= 1.0) {
       EXPECT_NE(match.scene_id, 0) << "map plane " << outline.id << " matches no scene plane";
     }
@@ -101,11 +109,9 @@ TEST(RoomPlaneMap, EveryLargeScenePlaneIsMappedOnceWithItsVisibleArea) {
     std::printf("scene plane %d (%s): visible %.3f m^2, %zu map planes\n", truth.id,
                 truth.name.c_str(), visible, on_it.size());
     ASSERT_EQ(on_it.size(), 1u) << "scene plane " << truth.name;
-    const mapping::MapPlane* plane = slam.map().Find(on_it.front());
-    const Match match = MatchScenePlane(*plane, sequence->scene());
+    const auto& [map_id, match, area] = on_it.front();
     EXPECT_LT(match.angle_deg, 1.0) << "scene plane " << truth.name;
-    const double area = slam.map().Outline(*plane).region.area;
-    std::printf("  map plane %d: %.3f m^2 (%+.1f %%), %.2f deg, %.1f mm\n", plane->id, area,
+    std::printf("  map plane %d: %.3f m^2 (%+.1f %%), %.2f deg, %.1f mm\n", map_id, area,
                 100.0 * (area - visible) / visible, match.angle_deg, 1e3 * match.offset);
     EXPECT_NEAR(area, visible, 0.15 * visible) << "scene plane " << truth.name;
   }
