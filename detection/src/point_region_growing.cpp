@@ -264,10 +264,7 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
   }
 
   const auto t2 = Clock::now();
-  if (params_.merge_regions) {
-    internal::MergeCoplanarRegions(ws.labels, width, height, ws.regions, params_);
-  }
-  internal::FinalizeSegmentation(cloud, ws.labels, ws.regions, params_, out);
+  internal::FinalizeLabelImage(cloud, ws.labels, ws.regions, params_, out);
   const auto t3 = Clock::now();
   out.timings_ms = {{"prepare", Ms(t0, t1)}, {"grow", Ms(t1, t2)}, {"finalize", Ms(t2, t3)}};
   return out;

@@ -5,7 +5,9 @@
 #include <cmath>
 #include <numeric>
 #include <tuple>
+#include <utility>
 
+#include "planeslam/datasets/errors.hpp"
 #include "planeslam/detection/plane_covariance.hpp"
 
 namespace planeslam::detection::internal {
@@ -18,43 +20,6 @@ int Find(std::vector<int>& parent, int a) {
   }
   return a;
 }
-
-/// Normal equations of the ray fit of one region: 1/s_i = m.q_i with q_i = p_i / s_i the ray
-/// of pixel i scaled to unit depth (unit range for a scanner) and m = n / d; A = sum w q q^T
-/// (upper triangle), b = sum w q / s.
-struct RaySums {
-  double a00 = 0, a01 = 0, a02 = 0, a11 = 0, a12 = 0, a22 = 0;
-  double b0 = 0, b1 = 0, b2 = 0;
-
-  /// Adds pixel p at depth s with weight w (a negative w removes it). The ray is formed in
-  /// float (one division; 1e-7 relative, far below the depth noise) and summed in double.
-  void Add(const Eigen::Vector3f& p, float s, double w) {
-    const float inv_f = 1.0f / s;
-    const double inv = inv_f;
-    const double qx = p.x() * inv_f, qy = p.y() * inv_f, qz = p.z() * inv_f;
-    const double wx = w * qx, wy = w * qy, wz = w * qz;
-    a00 += wx * qx;
-    a01 += wx * qy;
-    a02 += wx * qz;
-    a11 += wy * qy;
-    a12 += wy * qz;
-    a22 += wz * qz;
-    b0 += wx * inv;
-    b1 += wy * inv;
-    b2 += wz * inv;
-  }
-  void Add(const RaySums& o) {
-    a00 += o.a00;
-    a01 += o.a01;
-    a02 += o.a02;
-    a11 += o.a11;
-    a12 += o.a12;
-    a22 += o.a22;
-    b0 += o.b0;
-    b1 += o.b1;
-    b2 += o.b2;
-  }
-};
 
 /// Solves the ray fit (n = m / |m|, d = 1 / |m| > 0); false when its system is singular (rays
 /// spanning a line) or the result is not finite (the caller keeps the eigen fit).
@@ -118,8 +83,9 @@ bool VisibleHere(const Eigen::Vector3f& p, double s, const RayPlane& own, const 
 }
 
 /// The ray fit of every region (see DetectionParams::ray_fit), in two steps.
-/// 1. Fit each region along the rays.
-/// 2. Crease competition (up to kCreasePasses passes): a pixel 4-adjacent to another region moves
+/// 1. Fit each region along the rays, from its ray sums `sums`.
+/// 2. Crease competition (up to kCreasePasses passes, the first over `border_pixels`): a pixel
+///    4-adjacent to another region moves
 ///    there when VisibleHere says its ray sees that region's surface; the regions that changed
 ///    are fitted again, and the next pass looks only around the pixels that moved. Growth admits
 ///    a pixel by the paper's orthogonal distance, gamma + gamma_sigmas sigma_n, so at a crease a
@@ -127,53 +93,26 @@ bool VisibleHere(const Eigen::Vector3f& p, double s, const RayPlane& own, const 
 ///    grazing plane (a door jamb, a wall seen along) that strip tilts the normal by up to a
 ///    degree (synthetic room, Kinect noise: mean normal error of correct planes 0.157 -> 0.064
 ///    deg for PBRG, 0.066 -> 0.040 deg for GBRG).
-/// Moved pixels leave and join the region moments too, so all that is reported of a plane
-/// describes its final pixels.
+/// Moved pixels leave and join the region moments and ray sums too, so all that is reported of a
+/// plane describes its final pixels.
 std::vector<RayPlane> FitAlongRays(const datasets::OrganizedCloud& cloud,
                                    std::vector<std::int32_t>& labels,
-                                   std::vector<MomentSums>& regions,
+                                   std::vector<MomentSums>& regions, std::vector<RaySums>& sums,
+                                   const std::vector<std::size_t>& border_pixels,
                                    const DetectionParams& params) {
   constexpr int kCreasePasses = 3;
+  PLANESLAM_CHECK(sums.size() == regions.size(), "ray fit: one RaySums per region expected");
   const bool spherical = cloud.model == datasets::SensorModel::kSpherical;
   const int width = cloud.width, height = cloud.height;
-  // A Kinect-type model (sigma0 = 0) weighs every pixel alike; skip the two divisions per pixel.
-  const bool uniform_weight = params.sigma0 == 0.0;
-  auto weight = [&](double s) { return uniform_weight ? 1.0 : params.InverseDepthWeight(s); };
-
-  // One pass: the ray sums (runs of one label are summed locally and flushed when the label
-  // changes) and the pixels on a border between two regions, which the first crease pass visits.
-  std::vector<RaySums> sums(regions.size());
-  std::vector<std::size_t> candidates;
+  auto weight = [&](double s) { return RayWeight(params, s); };
+  // The first crease pass visits the pixels on a border between two regions.
+  std::vector<std::size_t> candidates = border_pixels;
   std::vector<char> queued(labels.size(), 0);
+  for (const std::size_t i : candidates) queued[i] = 1;
   auto enqueue = [&](std::size_t i) {
     if (!queued[i]) candidates.push_back(i);
     queued[i] = 1;
   };
-  RaySums run;
-  std::int32_t run_label = -1;
-  for (int y = 0; y < height; ++y) {
-    for (int x = 0; x < width; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * width + x;
-      const std::int32_t r = labels[i];
-      if (r < 0) continue;
-      if (r != run_label) {
-        if (run_label >= 0) sums[run_label].Add(run);
-        run = RaySums();
-        run_label = r;
-      }
-      const float s = PointDepth(cloud.points[i], spherical);
-      if (s > 0.0f) run.Add(cloud.points[i], s, weight(s));
-      if (x + 1 < width && labels[i + 1] >= 0 && labels[i + 1] != r) {
-        enqueue(i);
-        enqueue(i + 1);
-      }
-      if (y + 1 < height && labels[i + width] >= 0 && labels[i + width] != r) {
-        enqueue(i);
-        enqueue(i + width);
-      }
-    }
-  }
-  if (run_label >= 0) sums[run_label].Add(run);
   std::vector<RayPlane> planes(regions.size());
   for (std::size_t r = 0; r < regions.size(); ++r) planes[r] = SolveRegion(sums[r], regions[r]);
 
@@ -234,34 +173,97 @@ std::vector<RayPlane> FitAlongRays(const datasets::OrganizedCloud& cloud,
 
 }  // namespace
 
-void MergeCoplanarRegions(std::vector<std::int32_t>& labels, int width, int height,
-                          std::vector<MomentSums>& regions, const DetectionParams& params) {
-  const int n = static_cast<int>(regions.size());
-  if (n < 2) return;
-  // Adjacent pairs from right and down neighbours, packed into 64-bit keys, sorted unique.
-  // A border between two regions repeats the same pair along its length: skip a pair equal to the
-  // last one recorded, so the list to sort is about one entry per border run, not per pixel.
-  std::vector<std::uint64_t> pairs;
-  std::uint64_t last = ~std::uint64_t{0};
-  auto record = [&](std::int32_t a, std::int32_t b) {
-    const auto lo = static_cast<std::uint64_t>(std::min(a, b));
-    const auto hi = static_cast<std::uint64_t>(std::max(a, b));
-    const std::uint64_t key = lo << 32 | hi;
-    if (key != last) pairs.push_back(key);
-    last = key;
-  };
-  for (int y = 0; y < height; ++y) {
-    const std::int32_t* row = labels.data() + static_cast<std::size_t>(y) * width;
-    const std::int32_t* below = y + 1 < height ? row + width : nullptr;
-    for (int x = 0; x < width; ++x) {
-      const std::int32_t a = row[x];
-      if (a < 0) continue;
-      if (x + 1 < width && row[x + 1] >= 0 && row[x + 1] != a) record(a, row[x + 1]);
-      if (below && below[x] >= 0 && below[x] != a) record(a, below[x]);
+RegionBorderScan::RegionBorderScan(const std::vector<std::int32_t>& labels, int width, int height)
+    : labels_(labels), width_(width), height_(height), listed_(labels.size(), 0) {}
+
+void RegionBorderScan::Add(std::size_t i, std::int32_t r, std::size_t j) {
+  const std::int32_t other = labels_[j];
+  // Both sides: j may lie outside the scanned part (an interior grid of GBRG).
+  for (const std::size_t b : {i, j}) {
+    if (!listed_[b]) borders_.pixels.push_back(b);
+    listed_[b] = 1;
+  }
+  // A border repeats the same pair along its length: skip a pair equal to the last one, so the
+  // list to sort holds about one entry per border run, not one per pixel.
+  const auto lo = static_cast<std::uint64_t>(std::min(r, other));
+  const auto hi = static_cast<std::uint64_t>(std::max(r, other));
+  const std::uint64_t key = lo << 32 | hi;
+  if (key != last_pair_) borders_.pairs.push_back(key);
+  last_pair_ = key;
+}
+
+void RegionBorderScan::Scan(int x0, int y0, int x1, int y1) {
+  const auto w = static_cast<std::size_t>(width_);
+  const std::int32_t* labels = labels_.data();
+  for (int y = y0; y < y1; ++y) {
+    for (int x = x0; x < x1; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * w + x;
+      const std::int32_t r = labels[i];
+      if (r < 0) continue;
+      // Most pixels, even in the grids scanned, have no other region around: a few tests each.
+      const std::int32_t left = x > 0 ? labels[i - 1] : r;
+      const std::int32_t right = x + 1 < width_ ? labels[i + 1] : r;
+      const std::int32_t up = y > 0 ? labels[i - w] : r;
+      const std::int32_t down = y + 1 < height_ ? labels[i + w] : r;
+      auto other = [r](std::int32_t o) { return o >= 0 && o != r; };
+      if (other(left)) Add(i, r, i - 1);
+      if (other(right)) Add(i, r, i + 1);
+      if (other(up)) Add(i, r, i - w);
+      if (other(down)) Add(i, r, i + w);
     }
   }
-  std::sort(pairs.begin(), pairs.end());
-  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+}
+
+RegionBorders RegionBorderScan::Finish() {
+  std::sort(borders_.pairs.begin(), borders_.pairs.end());
+  borders_.pairs.erase(std::unique(borders_.pairs.begin(), borders_.pairs.end()),
+                       borders_.pairs.end());
+  return std::move(borders_);
+}
+
+RegionBorders ScanLabelImage(const datasets::OrganizedCloud& cloud,
+                             const std::vector<std::int32_t>& labels, std::size_t num_regions,
+                             const DetectionParams& params, std::vector<RaySums>* rays) {
+  const bool spherical = cloud.model == datasets::SensorModel::kSpherical;
+  const int width = cloud.width, height = cloud.height;
+  RegionBorderScan borders(labels, width, height);
+  if (rays) rays->assign(num_regions, RaySums());
+  // Runs of one label are summed locally and flushed when the label changes.
+  RaySums run;
+  std::int32_t run_label = -1;
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * width + x;
+      const std::int32_t r = labels[i];
+      if (r < 0) continue;
+      if (rays) {
+        if (r != run_label) {
+          if (run_label >= 0) (*rays)[run_label].Add(run);
+          run = RaySums();
+          run_label = r;
+        }
+        // A point behind the sensor (possible in a PCD) has no ray fit weight.
+        const float s = PointDepth(cloud.points[i], spherical);
+        if (s > 0.0f) run.Add(cloud.points[i], s, RayWeight(params, s));
+      }
+      // Right and down neighbours: every 4-adjacent pair of pixels once.
+      if (x + 1 < width && labels[i + 1] >= 0 && labels[i + 1] != r) borders.Add(i, r, i + 1);
+      if (y + 1 < height && labels[i + width] >= 0 && labels[i + width] != r) {
+        borders.Add(i, r, i + width);
+      }
+    }
+  }
+  if (rays && run_label >= 0) (*rays)[run_label].Add(run);
+  return borders.Finish();
+}
+
+void MergeCoplanarRegions(std::vector<std::int32_t>& labels,
+                          const std::vector<std::uint64_t>& touching_pairs,
+                          std::vector<MomentSums>& regions, std::vector<RaySums>& rays,
+                          const DetectionParams& params) {
+  const int n = static_cast<int>(regions.size());
+  if (n < 2) return;
+  const std::vector<std::uint64_t>& pairs = touching_pairs;
   const double cos_merge = std::cos(params.merge_angle_deg * M_PI / 180.0);
   std::vector<FastFit> fits(n);
   for (int i = 0; i < n; ++i) fits[i] = FitSums(regions[i]);
@@ -324,25 +326,31 @@ void MergeCoplanarRegions(std::vector<std::int32_t>& labels, int width, int heig
     }
     regions[a].Merge(regions[b]);
     regions[b] = MomentSums();
+    if (!rays.empty()) {
+      rays[a].Add(rays[b]);
+      rays[b] = RaySums();
+    }
     parent[b] = a;
     merged_any = true;
   }
   if (!merged_any) return;
+  for (int i = 0; i < n; ++i) parent[i] = Find(parent, i);  // now every region's root
   for (auto& l : labels) {
-    if (l >= 0) l = Find(parent, l);
+    if (l >= 0) l = parent[l];
   }
 }
 
 void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
                           std::vector<std::int32_t>& region_labels,
-                          std::vector<MomentSums>& regions, const DetectionParams& params,
-                          Segmentation& out) {
+                          std::vector<MomentSums>& regions, std::vector<RaySums>& rays,
+                          const std::vector<std::size_t>& border_pixels,
+                          const DetectionParams& params, Segmentation& out) {
   out.width = cloud.width;
   out.height = cloud.height;
   const int n = static_cast<int>(regions.size());
-  const std::vector<RayPlane> ray_planes = params.ray_fit
-                                               ? FitAlongRays(cloud, region_labels, regions, params)
-                                               : std::vector<RayPlane>();
+  const std::vector<RayPlane> ray_planes =
+      params.ray_fit ? FitAlongRays(cloud, region_labels, regions, rays, border_pixels, params)
+                     : std::vector<RayPlane>();
   std::vector<int> order;
   order.reserve(n);
   for (int i = 0; i < n; ++i) {
@@ -381,6 +389,20 @@ void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
     const std::int32_t r = region_labels[i];
     out.labels[i] = r >= 0 ? id_of[r] : -1;
   }
+}
+
+void FinalizeLabelImage(const datasets::OrganizedCloud& cloud, std::vector<std::int32_t>& labels,
+                        std::vector<MomentSums>& regions, const DetectionParams& params,
+                        Segmentation& out) {
+  // Region borders (merge candidates, crease pixels) and ray sums from one look at every pixel.
+  RegionBorders borders;
+  std::vector<RaySums> rays;
+  if (params.merge_regions || params.ray_fit) {
+    borders =
+        ScanLabelImage(cloud, labels, regions.size(), params, params.ray_fit ? &rays : nullptr);
+  }
+  if (params.merge_regions) MergeCoplanarRegions(labels, borders.pairs, regions, rays, params);
+  FinalizeSegmentation(cloud, labels, regions, rays, borders.pixels, params, out);
 }
 
 }  // namespace planeslam::detection::internal

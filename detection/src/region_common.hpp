@@ -16,24 +16,121 @@ inline float PointDepth(const Eigen::Vector3f& p, bool spherical) {
   return spherical ? p.norm() : p.z();
 }
 
-/// Merges regions that describe one plane: adjacent ones (4-connected in the label image) and,
-/// with params.merge_disjoint, also ones that do not touch; the test is normals within
-/// merge_angle_deg and MSE of the union below epsilon (of the union's noise). Pairs are tried in
-/// order of increasing union MSE (deterministic; ties by region indices); a merged region keeps
-/// the smaller index. `labels` holds region indices (-1 none) and is rewritten; merged-away
-/// regions get k = 0 in `regions`.
-void MergeCoplanarRegions(std::vector<std::int32_t>& labels, int width, int height,
-                          std::vector<MomentSums>& regions, const DetectionParams& params);
+/// Normal equations of the ray fit of one region: 1/s_i = m.q_i with q_i = p_i / s_i the ray
+/// of pixel i scaled to unit depth (unit range for a scanner) and m = n / d; A = sum w q q^T
+/// (upper triangle), b = sum w q / s.
+struct RaySums {
+  double a00 = 0, a01 = 0, a02 = 0, a11 = 0, a12 = 0, a22 = 0;
+  double b0 = 0, b1 = 0, b2 = 0;
+
+  /// Adds pixel p at depth s with weight w (a negative w removes it). The ray is formed in
+  /// float (one division; 1e-7 relative, far below the depth noise) and summed in double.
+  void Add(const Eigen::Vector3f& p, float s, double w) {
+    const float inv_f = 1.0f / s;
+    const double inv = inv_f;
+    const double qx = p.x() * inv_f, qy = p.y() * inv_f, qz = p.z() * inv_f;
+    const double wx = w * qx, wy = w * qy, wz = w * qz;
+    a00 += wx * qx;
+    a01 += wx * qy;
+    a02 += wx * qz;
+    a11 += wy * qy;
+    a12 += wy * qz;
+    a22 += wz * qz;
+    b0 += wx * inv;
+    b1 += wy * inv;
+    b2 += wz * inv;
+  }
+  void Add(const RaySums& o) {
+    a00 += o.a00;
+    a01 += o.a01;
+    a02 += o.a02;
+    a11 += o.a11;
+    a12 += o.a12;
+    a22 += o.a22;
+    b0 += o.b0;
+    b1 += o.b1;
+    b2 += o.b2;
+  }
+  /// Removes sums added before (exact up to round-off).
+  void Subtract(const RaySums& o) {
+    a00 -= o.a00;
+    a01 -= o.a01;
+    a02 -= o.a02;
+    a11 -= o.a11;
+    a12 -= o.a12;
+    a22 -= o.a22;
+    b0 -= o.b0;
+    b1 -= o.b1;
+    b2 -= o.b2;
+  }
+};
+
+/// Weight of a pixel at depth (or range) s in the ray fit. A Kinect-type model (sigma0 = 0)
+/// weighs every pixel alike, which spares two divisions per pixel.
+inline double RayWeight(const DetectionParams& params, double s) {
+  return params.sigma0 == 0.0 ? 1.0 : params.InverseDepthWeight(s);
+}
+
+/// Where regions meet in a region-index image (-1 = none).
+struct RegionBorders {
+  std::vector<std::size_t> pixels;   ///< pixels 4-adjacent to a pixel of another region, once each
+  std::vector<std::uint64_t> pairs;  ///< regions that touch, lo << 32 | hi, sorted and unique
+};
+
+/// Collects RegionBorders, pixel pair by pixel pair or from parts of the image (GBRG scans only
+/// the grids on a region's edge: its interior grids hold one label and so hold no border).
+class RegionBorderScan {
+ public:
+  RegionBorderScan(const std::vector<std::int32_t>& labels, int width, int height);
+  /// Records pixel i of region r and its 4-neighbour j, which lies in another region (>= 0).
+  void Add(std::size_t i, std::int32_t r, std::size_t j);
+  /// Looks at every pixel of [x0, x1) x [y0, y1) and its four neighbours (also outside it).
+  void Scan(int x0, int y0, int x1, int y1);
+  /// The borders found, pairs sorted and unique.
+  RegionBorders Finish();
+
+ private:
+  const std::vector<std::int32_t>& labels_;
+  int width_, height_;
+  std::vector<char> listed_;
+  std::uint64_t last_pair_ = ~std::uint64_t{0};
+  RegionBorders borders_;
+};
+
+/// One pass over a whole region-index image (PBRG; GBRG gathers the same grid by grid): the
+/// borders between regions and, when `rays` is not null, every region's ray sums.
+RegionBorders ScanLabelImage(const datasets::OrganizedCloud& cloud,
+                             const std::vector<std::int32_t>& labels, std::size_t num_regions,
+                             const DetectionParams& params, std::vector<RaySums>* rays);
+
+/// Merges regions that describe one plane: touching ones (`touching_pairs`, from
+/// RegionBorders) and, with params.merge_disjoint, also ones that do not touch; the test is
+/// normals within merge_angle_deg and MSE of the union below epsilon (of the union's noise).
+/// Pairs are tried in order of increasing union MSE (deterministic; ties by region indices); a
+/// merged region keeps the smaller index. `labels` holds region indices (-1 none) and is
+/// rewritten; merged-away regions get k = 0 in `regions`, and their ray sums (when `rays` is
+/// not empty) move with their moments.
+void MergeCoplanarRegions(std::vector<std::int32_t>& labels,
+                          const std::vector<std::uint64_t>& touching_pairs,
+                          std::vector<MomentSums>& regions, std::vector<RaySums>& rays,
+                          const DetectionParams& params);
 
 /// Builds the output: one Plane per region with k >= 3 (sorted by point count descending, then by
 /// region index), labels rewritten to plane ids (>= 1) or -1, covariance from the region noise.
 /// The plane is the eigen fit of the region's moments, or with params.ray_fit the inverse-depth
-/// fit over its pixels in `cloud` (the eigen fit where that is degenerate).
-/// The ray fit also drops the pixels it finds far off the plane from `region_labels` and
-/// `regions` (see FitAlongRays in the source).
+/// fit of its ray sums `rays` (the eigen fit where that is degenerate).
+/// The ray fit also lets the pixels of `border_pixels` change region at a crease, updating
+/// `region_labels`, `regions` and `rays` (see FitAlongRays in the source).
 void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
                           std::vector<std::int32_t>& region_labels,
-                          std::vector<MomentSums>& regions, const DetectionParams& params,
-                          Segmentation& out);
+                          std::vector<MomentSums>& regions, std::vector<RaySums>& rays,
+                          const std::vector<std::size_t>& border_pixels,
+                          const DetectionParams& params, Segmentation& out);
+
+/// The whole of what follows growth for a grower that has only a region-index image (PBRG):
+/// ScanLabelImage, then MergeCoplanarRegions (params.merge_regions), then FinalizeSegmentation.
+void FinalizeLabelImage(const datasets::OrganizedCloud& cloud, std::vector<std::int32_t>& labels,
+                        std::vector<MomentSums>& regions, const DetectionParams& params,
+                        Segmentation& out);
 
 }  // namespace planeslam::detection::internal
