@@ -56,6 +56,9 @@ void SymEigenvalues3(const double c[6], double& l1, double& l2, double& l3) {
 
 namespace {
 
+/// Newton steps before the closed form takes over (planar sets converge in 3-5).
+constexpr int kNewtonSteps = 6;
+
 /// Eigenvalues of a positive semi-definite C whose smallest one is well separated (the common case
 /// in plane fitting), without trigonometry: Newton on the characteristic polynomial
 /// p(l) = l^3 - t l^2 + m l - det from l = 0. p is increasing and concave on [0, l1] (p'' = 6 l - 2
@@ -74,7 +77,7 @@ bool SymEigenvaluesNewton(const double c[6], double relative_tolerance, double& 
   if (!(t > 0) || !(m > 0) || det < 0) return false;
   double l = 0.0;
   bool converged = false;
-  for (int it = 0; it < 6; ++it) {
+  for (int it = 0; it < kNewtonSteps; ++it) {
     const double p = ((l - t) * l + m) * l - det;
     const double dp = (3.0 * l - 2.0 * t) * l + m;
     if (!(dp > 0)) return false;
@@ -96,6 +99,60 @@ bool SymEigenvaluesNewton(const double c[6], double relative_tolerance, double& 
 }
 
 }  // namespace
+
+namespace {
+
+/// The loop of SymEigenvaluesNewtonBatch. Restrict parameters (distinct arrays) let the compiler
+/// vectorise it without run-time overlap checks.
+void NewtonBatchKernel(const double* __restrict c0, const double* __restrict c1,
+                       const double* __restrict c2, const double* __restrict c3,
+                       const double* __restrict c4, const double* __restrict c5, int n,
+                       double relative_tolerance, double* __restrict out1, double* __restrict out2,
+                       double* __restrict out3, double* __restrict out_ok) {
+  for (int i = 0; i < n; ++i) {
+    // The same arithmetic as SymEigenvaluesNewton, every lane taking all steps: once converged a
+    // step is ~0, and the steps shrink monotonically, so "the last step is small" is "some step
+    // was small". Selects rather than branches, and unconditional divisions.
+    const double t = c0[i] + c3[i] + c5[i];
+    const double m00 = c3[i] * c5[i] - c4[i] * c4[i], m11 = c0[i] * c5[i] - c2[i] * c2[i],
+                 m22 = c0[i] * c3[i] - c1[i] * c1[i];
+    const double m = m00 + m11 + m22;
+    const double det = c0[i] * m00 + c1[i] * (c2[i] * c4[i] - c1[i] * c5[i]) +
+                       c2[i] * (c1[i] * c4[i] - c2[i] * c3[i]);
+    // Flags as doubles (1 or 0), selected like the values: SSE2 vectorises that.
+    double good = (t > 0) ? 1.0 : 0.0;
+    good = (m > 0) ? good : 0.0;
+    good = (det >= 0) ? good : 0.0;
+    double l = 0.0, step = 0.0;
+#pragma GCC unroll 8
+    for (int it = 0; it < kNewtonSteps; ++it) {
+      const double p = ((l - t) * l + m) * l - det;
+      const double dp = (3.0 * l - 2.0 * t) * l + m;
+      good = (dp > 0) ? good : 0.0;
+      step = -p / (dp > 0 ? dp : 1.0);
+      l += step;
+    }
+    good = (std::abs(step) <= relative_tolerance * t) ? good : 0.0;
+    const double s = t - l;         // l2 + l3
+    const double prod = m - l * s;  // l2 l3
+    const double disc = std::sqrt(std::max(0.0, s * s - 4.0 * prod));
+    const double hi = 0.5 * (s + disc);
+    const double quotient = prod / (hi > 0 ? hi : 1.0);
+    const double mid = hi > 0 ? quotient : 0.0;
+    out1[i] = l;
+    out2[i] = mid;
+    out3[i] = hi;
+    good = (l <= mid) ? good : 0.0;
+    out_ok[i] = (mid <= hi) ? good : 0.0;
+  }
+}
+
+}  // namespace
+
+void SymEigenvaluesNewtonBatch(const double* const c[6], int n, double relative_tolerance,
+                               double* l1, double* l2, double* l3, double* ok) {
+  NewtonBatchKernel(c[0], c[1], c[2], c[3], c[4], c[5], n, relative_tolerance, l1, l2, l3, ok);
+}
 
 void SmallestEigenvector(const double c[6], SymEigen3& e) {
   const Eigen::Vector3d r0(c[0] - e.l1, c[1], c[2]);

@@ -36,6 +36,10 @@ struct Workspace {
   std::vector<MomentSums> sums;
   std::vector<double> noise_weight;  ///< each grid's w = (sigma(z) / z)^2 at its centre
   std::vector<CellClass> classes;
+  std::vector<int> dense;          ///< the non-sparse grids
+  std::vector<double> scatter[6];  ///< their scatter, one array per entry
+  std::vector<double> l1, l2, l3;  ///< their eigenvalues, ascending
+  std::vector<double> eigen_ok;    ///< 0: l1..l3 to come from the closed form
   std::vector<CellInfo> info;
   std::vector<std::int32_t> cell_region;
   std::vector<std::uint8_t> used;
@@ -162,17 +166,41 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     std::memcpy(&bits, &f, 4);
     return static_cast<std::uint64_t>(bits) << 32 | static_cast<std::uint32_t>(c);
   };
+  // The scatter of every non-sparse grid, then their eigenvalues all at once (the batch keeps
+  // the divisions of many grids in flight).
+  ws.dense.clear();
   for (int c = 0; c < num_cells; ++c) {
-    const MomentSums& s = ws.sums[c];
-    if (s.k < mu) continue;  // sparse
+    if (ws.sums[c].k >= mu) ws.dense.push_back(c);  // else sparse
+  }
+  const int num_dense = static_cast<int>(ws.dense.size());
+  for (auto& column : ws.scatter) column.resize(num_dense);
+  for (auto* l : {&ws.l1, &ws.l2, &ws.l3}) l->resize(num_dense);
+  ws.eigen_ok.resize(num_dense);
+  for (int j = 0; j < num_dense; ++j) {
     double scatter[6];
-    s.Scatter(scatter);
+    ws.sums[ws.dense[j]].Scatter(scatter);
+    for (int i = 0; i < 6; ++i) ws.scatter[i][j] = scatter[i];
+  }
+  // A grid's eigenvalues feed thresholds and a float seed key: Newton's last step below 1e-9 of
+  // the trace is plenty (a grid whose normal is read refines l1 as its Rayleigh quotient
+  // anyway). Lanes where it is not reached in six steps (l1 close to l2) use the closed form.
+  const double* columns[6];
+  for (int i = 0; i < 6; ++i) columns[i] = ws.scatter[i].data();
+  SymEigenvaluesNewtonBatch(columns, num_dense, 1e-9, ws.l1.data(), ws.l2.data(), ws.l3.data(),
+                            ws.eigen_ok.data());
+  for (int j = 0; j < num_dense; ++j) {
+    const int c = ws.dense[j];
+    const MomentSums& s = ws.sums[c];
+    double scatter[6];
+    for (int i = 0; i < 6; ++i) scatter[i] = ws.scatter[i][j];
     SymEigen3 e;
-    // A grid's eigenvalues feed thresholds and a float seed key. Newton converges quadratically,
-    // so stopping at a step of 1e-6 of the trace leaves l1 off by ~1e-12 of it (a grid whose
-    // normal is read refines l1 as its Rayleigh quotient anyway). TUM fr3 frames give the same
-    // planes as with 1e-9, and classification takes 10 % less time.
-    SymEigenvaluesAscending(scatter, e.l1, e.l2, e.l3, 1e-6);
+    if (ws.eigen_ok[j]) {
+      e.l1 = ws.l1[j];
+      e.l2 = ws.l2[j];
+      e.l3 = ws.l3[j];
+    } else {
+      SymEigenvalues3(scatter, e.l1, e.l2, e.l3);
+    }
     if (e.l2 <= grid_.alpha * e.l3) {
       ws.classes[c] = CellClass::kLinear;
       continue;

@@ -105,6 +105,51 @@ TEST(FastMoments, EigenSolverMatchesEigen) {
   }
 }
 
+TEST(FastMoments, BatchEigenvaluesMatchEigenOrDeferToTheClosedForm) {
+  // Plane-like (one tiny eigenvalue), general, two equal eigenvalues (Newton cannot separate
+  // them), and rank-deficient or empty matrices: every usable lane matches Eigen's solver, the
+  // plane-like ones are all usable, and no lane is NaN.
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> uni(-1, 1);
+  constexpr int kCount = 1000;
+  std::vector<double> columns[6];
+  std::vector<Eigen::Matrix3d> matrices;
+  for (int i = 0; i < kCount; ++i) {
+    const Eigen::Matrix3d a = Eigen::Matrix3d::NullaryExpr([&] { return uni(rng); });
+    Eigen::Matrix3d c = a * a.transpose();
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(c);
+    Eigen::Vector3d ev = es.eigenvalues();
+    if (i % 4 == 0) ev(0) = ev(2) * 1e-9;  // plane-like
+    if (i % 4 == 1) ev(1) = ev(0);         // a double smallest eigenvalue
+    if (i % 50 == 2) ev.setZero();         // no points
+    if (i % 50 == 3) ev(0) = ev(1) = 0.0;  // points on a line
+    c = es.eigenvectors() * ev.asDiagonal() * es.eigenvectors().transpose();
+    matrices.push_back(c);
+    const double u[6] = {c(0, 0), c(0, 1), c(0, 2), c(1, 1), c(1, 2), c(2, 2)};
+    for (int j = 0; j < 6; ++j) columns[j].push_back(u[j]);
+  }
+  const double* c[6];
+  for (int j = 0; j < 6; ++j) c[j] = columns[j].data();
+  std::vector<double> l1(kCount), l2(kCount), l3(kCount), ok(kCount);
+  SymEigenvaluesNewtonBatch(c, kCount, 1e-9, l1.data(), l2.data(), l3.data(), ok.data());
+  int usable = 0;
+  for (int i = 0; i < kCount; ++i) {
+    ASSERT_TRUE(ok[i] == 0.0 || ok[i] == 1.0) << i;
+    if (i % 4 == 0 && i % 50 != 2) {
+      EXPECT_EQ(ok[i], 1.0) << "plane-like matrix " << i;
+    }
+    if (ok[i] == 0.0) continue;
+    ++usable;
+    ASSERT_TRUE(std::isfinite(l1[i]) && std::isfinite(l2[i]) && std::isfinite(l3[i])) << i;
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ref(matrices[i]);
+    const double scale = ref.eigenvalues()(2);
+    EXPECT_NEAR(l1[i], ref.eigenvalues()(0), 1e-9 * scale) << i;
+    EXPECT_NEAR(l2[i], ref.eigenvalues()(1), 1e-9 * scale) << i;
+    EXPECT_NEAR(l3[i], ref.eigenvalues()(2), 1e-9 * scale) << i;
+  }
+  EXPECT_GT(usable, kCount / 2);
+}
+
 TEST(FastMoments, IncrementalFitEqualsBatchFit) {
   const auto pts = NoisyPlanePoints(400, 6, 0.005, Eigen::Vector3d(0.1, 0.9, 0.3), 1.2);
   MomentSums inc;
