@@ -10,6 +10,7 @@
 
 #include "bench_common.hpp"
 #include "cli_common.hpp"
+#include "config_sections_registration.hpp"
 #include "detector_factory.hpp"
 #include "interrupt.hpp"
 #include "planeslam/datasets/atomic_file.hpp"
@@ -69,11 +70,7 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
   const std::string method =
       options.method.empty() ? config.Get<DetectionSection>("detection").method : options.method;
   const std::unique_ptr<detection::PlaneDetector> detector = MakeDetector(method, config);
-  registration::PlaneOdometryConfig odometry_config =
-      config.Get<registration::PlaneOdometryConfig>("odometry");
-  odometry_config.association = config.Get<registration::AssociationConfig>("association");
-  odometry_config.registration = config.Get<registration::RegistrationConfig>("registration");
-  odometry_config.point_to_plane = config.Get<registration::PointToPlaneConfig>("point_to_plane");
+  const registration::PlaneOdometryConfig odometry_config = OdometryConfigFrom(config);
   const std::optional<Pose> first_gt = sequence->GroundTruth(0);
   const Pose T_world_first = first_gt ? *first_gt : Pose::Identity();
   registration::PlaneOdometry odometry(odometry_config, T_world_first);

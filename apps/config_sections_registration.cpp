@@ -121,6 +121,10 @@ void VisitOdometry(FieldVisitor& v, registration::PlaneOdometryConfig& c) {
           "[s] the predicted velocity is the mean of the motions of this last span (0 = the last "
           "motion alone)",
           0.0, 1000.0);
+  v.Field("systematic_point_sigma", c.systematic_point_sigma,
+          "[m] error of a plane's points that does not average out (depth bias, edge pixels): a "
+          "narrow plane is uncertain by this over its width (registration; SLAM tracking uses 0)",
+          0.0, 1.0);
 }
 
 std::vector<std::string> ValidateOdometry(const registration::PlaneOdometryConfig& c) {
@@ -131,6 +135,7 @@ std::vector<std::string> ValidateOdometry(const registration::PlaneOdometryConfi
   scalars.prior_rotation_sigma = c.prior_rotation_sigma;
   scalars.max_prior_gap = c.max_prior_gap;
   scalars.velocity_window = c.velocity_window;
+  scalars.systematic_point_sigma = c.systematic_point_sigma;
   return scalars.Validate();
 }
 

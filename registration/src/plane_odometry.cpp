@@ -14,6 +14,7 @@ std::vector<std::string> PlaneOdometryConfig::Validate() const {
   if (!(prior_rotation_sigma > 0)) p.push_back("prior_rotation_sigma must be > 0");
   if (!(max_prior_gap > 0)) p.push_back("max_prior_gap must be > 0");
   if (!(velocity_window >= 0)) p.push_back("velocity_window must be >= 0");
+  if (!(systematic_point_sigma >= 0)) p.push_back("systematic_point_sigma must be >= 0");
   return p;
 }
 
@@ -21,7 +22,9 @@ PlaneOdometry::PlaneOdometry(PlaneOdometryConfig config, const Pose& T_world_fir
     : config_(std::move(config)),
       T_world_first_(T_world_first),
       T_world_sensor_(T_world_first),
-      velocity_(config_.velocity_window) {}
+      velocity_(config_.velocity_window) {
+  config_.registration.systematic_point_sigma = config_.systematic_point_sigma;
+}
 
 void PlaneOdometry::Reset(const Pose& T_world_first) {
   T_world_first_ = T_world_first;

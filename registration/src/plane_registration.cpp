@@ -16,6 +16,7 @@ std::vector<std::string> RegistrationConfig::Validate() const {
   if (!(min_normal_sigma >= 0)) problems.push_back("min_normal_sigma must be >= 0");
   if (!(min_offset_sigma >= 0)) problems.push_back("min_offset_sigma must be >= 0");
   if (!(covariance_scale > 0)) problems.push_back("covariance_scale must be > 0");
+  if (!(systematic_point_sigma >= 0)) problems.push_back("systematic_point_sigma must be >= 0");
   if (!(fallback_point_sigma > 0)) problems.push_back("fallback_point_sigma must be > 0");
   if (!(max_translation_sigma > 0)) problems.push_back("max_translation_sigma must be > 0");
   if (!(max_rotation_sigma > 0)) problems.push_back("max_rotation_sigma must be > 0");
@@ -26,17 +27,15 @@ std::vector<std::string> RegistrationConfig::Validate() const {
   return problems;
 }
 
-Eigen::Matrix4d PlaneCovarianceOrFallback(const detection::Plane& plane,
-                                          double fallback_point_sigma) {
-  const Eigen::Matrix4d& own = plane.covariance;
-  if (own.allFinite() && own.diagonal().sum() > 0.0) return 0.5 * (own + own.transpose());
+namespace {
 
+/// Covariance of (n, d) of a least-squares plane fit to the plane's points (its moments, or its
+/// eigenvalues and count) when each errs by sigma2 along the normal.
+Eigen::Matrix4d FitCovariance(const detection::Plane& plane, double sigma2) {
   // Linearised least-squares plane fit with isotropic point noise sigma^2: a tilt about the
   // in-plane axis e_k moves points at spread sqrt(lambda_k) (lambda_k = sum of squared distances
   // along e_k), so Var = sigma^2 / lambda_k; the centroid moves by sigma^2 / K along n and
   // d = n.c couples the two (Cov(n, d) = Cov(n) c).
-  const double sigma2 = std::max(std::isfinite(plane.mse) ? plane.mse : 0.0,
-                                 fallback_point_sigma * fallback_point_sigma);
   const Eigen::Vector3d n = plane.normal.allFinite() && plane.normal.norm() > 0.5
                                 ? Eigen::Vector3d(plane.normal.normalized())
                                 : Eigen::Vector3d::UnitZ();
@@ -74,6 +73,17 @@ Eigen::Matrix4d PlaneCovarianceOrFallback(const detection::Plane& plane,
   return cov;
 }
 
+}  // namespace
+
+Eigen::Matrix4d PlaneCovarianceOrFallback(const detection::Plane& plane,
+                                          double fallback_point_sigma) {
+  const Eigen::Matrix4d& own = plane.covariance;
+  if (own.allFinite() && own.diagonal().sum() > 0.0) return 0.5 * (own + own.transpose());
+  const double sigma2 = std::max(std::isfinite(plane.mse) ? plane.mse : 0.0,
+                                 fallback_point_sigma * fallback_point_sigma);
+  return FitCovariance(plane, sigma2);
+}
+
 namespace internal {
 
 bool MakeMatchData(const std::vector<detection::Plane>& prev,
@@ -102,6 +112,16 @@ bool MakeMatchData(const std::vector<detection::Plane>& prev,
   }
   m.cov_a = PlaneCovarianceOrFallback(a, config.fallback_point_sigma) * config.covariance_scale;
   m.cov_b = PlaneCovarianceOrFallback(b, config.fallback_point_sigma) * config.covariance_scale;
+  if (config.systematic_point_sigma > 0.0) {
+    // An error shared by all K points is not divided by K: the fit covariance of noise s sqrt(K).
+    // Only planes whose extent is known (their moments, as the detectors give them).
+    const double s2 = config.systematic_point_sigma * config.systematic_point_sigma;
+    for (const auto& [plane, cov] : {std::pair{&a, &m.cov_a}, std::pair{&b, &m.cov_b}}) {
+      if (plane->moments.count() >= 3) {
+        *cov += FitCovariance(*plane, s2 * static_cast<double>(plane->moments.count()));
+      }
+    }
+  }
   m.tangent = TangentBasis(m.n_a);
   return true;
 }

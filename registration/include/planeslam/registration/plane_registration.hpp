@@ -44,6 +44,14 @@ struct RegistrationConfig {
   double min_normal_sigma = 0.002;
   /// Same for the plane offset [m].
   double min_offset_sigma = 0.005;
+  /// Error of a plane's points along its normal that does not average out over them (depth bias
+  /// that varies across the image, mixed pixels along the plane's edges) [m]. It tilts a plane
+  /// by about sigma / width, so a narrow plane (a sliver at the image border) is uncertain by
+  /// that rather than by its noise's sigma / (width sqrt(K)); each plane's covariance gains the
+  /// fit covariance of K points with noise sigma sqrt(K) (planes that carry their moments, as the
+  /// detectors' do; others have no known extent). 0 = off. See PlaneOdometryConfig for the
+  /// odometry's value and why SLAM tracking keeps 0.
+  double systematic_point_sigma = 0.0;
   /// Multiplies the planes' own covariances (>1 when the detector is overconfident) [-].
   /// 4 (sigma x2) measured on TUM fr3 structure_notexture_far with GBRG: the chi^2 verification
   /// then keeps ~6.7 instead of ~5.7 matches a frame and the 1 s RPE over the 252 frames drops
