@@ -302,6 +302,19 @@ TEST(PlaneRegistration, BadIndicesAreABug) {
   EXPECT_THROW(RegisterPlanes({}, {}, {{0, 0}}, MotionPrior()), planeslam::CheckError);
 }
 
+/// The plane fitted to `mom`, carrying the moments (no covariance).
+detection::Plane PlaneFromMoments(const detection::PlaneMoments& mom) {
+  const detection::PlaneFit fit = mom.Fit();
+  detection::Plane p;
+  p.normal = fit.normal;
+  p.d = fit.d;
+  p.centroid = fit.centroid;
+  p.point_count = mom.count();
+  p.eigenvalues = fit.eigenvalues;
+  p.moments = mom;
+  return p;
+}
+
 /// A detector-like plane from a patch of nu x nv points (spacing h) around `centre`, spanned by
 /// u and v, each point moved by T; its covariance is that of 1 mm point noise.
 detection::Plane PatchPlane(const Eigen::Vector3d& centre, const Eigen::Vector3d& u,
@@ -313,14 +326,7 @@ detection::Plane PatchPlane(const Eigen::Vector3d& centre, const Eigen::Vector3d
                                    (j - 0.5 * (nv - 1)) * h * v)));
     }
   }
-  const detection::PlaneFit fit = mom.Fit();
-  detection::Plane p;
-  p.normal = fit.normal;
-  p.d = fit.d;
-  p.centroid = fit.centroid;
-  p.point_count = mom.count();
-  p.eigenvalues = fit.eigenvalues;
-  p.moments = mom;
+  detection::Plane p = PlaneFromMoments(mom);
   p.covariance = detection::PlaneCovariance(mom, p.normal, 1e-6);
   return p;
 }
@@ -372,13 +378,7 @@ TEST(PlaneRegistration, FallbackCovarianceFollowsTheFitGeometry) {
     for (int j = -5; j <= 5; ++j) mom.Add(Eigen::Vector3d(0.05 * i, 0.05 * j, 3.0));
   }
   const detection::PlaneFit fit = mom.Fit();
-  detection::Plane p;
-  p.normal = fit.normal;
-  p.d = fit.d;
-  p.centroid = fit.centroid;
-  p.point_count = mom.count();
-  p.eigenvalues = fit.eigenvalues;
-  p.moments = mom;
+  const detection::Plane p = PlaneFromMoments(mom);
   const Eigen::Matrix4d c = PlaneCovarianceOrFallback(p, 0.01);
   EXPECT_LT((c.topLeftCorner<3, 3>() * p.normal).norm(), 1e-15);
   // Var about x-tilt (normal moving along y) > Var about y-tilt (normal moving along x).
