@@ -59,48 +59,63 @@ namespace {
 /// Newton steps before the closed form takes over (planar sets converge in 3-5).
 constexpr int kNewtonSteps = 6;
 
+/// The characteristic polynomial p(l) = l^3 - t l^2 + m l - det of a symmetric C (upper triangle
+/// c00 c01 c02 c11 c12 c22).
+struct CharacteristicPolynomial {
+  double t, m, det;
+};
+inline CharacteristicPolynomial Characteristic(double c00, double c01, double c02, double c11,
+                                               double c12, double c22) {
+  const double m00 = c11 * c22 - c12 * c12, m11 = c00 * c22 - c02 * c02,
+               m22 = c00 * c11 - c01 * c01;
+  return {c00 + c11 + c22, m00 + m11 + m22,
+          c00 * m00 + c01 * (c02 * c12 - c01 * c22) + c02 * (c01 * c12 - c02 * c11)};
+}
+/// One Newton step on p from l; `slope` = p'(l). The division is unconditional (a step taken at
+/// a slope <= 0 is refused by the callers), which keeps the batch loop free of branches.
+inline double NewtonStep(const CharacteristicPolynomial& q, double l, double& slope) {
+  const double p = ((l - q.t) * l + q.m) * l - q.det;
+  slope = (3.0 * l - 2.0 * q.t) * l + q.m;
+  return -p / (slope > 0 ? slope : 1.0);
+}
+/// l2 and l3 given l1: they solve l2 + l3 = t - l1, l2 l3 = m - l1 (t - l1). l2 is l2 l3 / l3,
+/// not (s - disc) / 2, which cancels when l2 << l3.
+inline void UpperEigenvalues(const CharacteristicPolynomial& q, double l1, double& l2, double& l3) {
+  const double s = q.t - l1;         // l2 + l3
+  const double prod = q.m - l1 * s;  // l2 l3
+  const double disc = std::sqrt(std::max(0.0, s * s - 4.0 * prod));
+  l3 = 0.5 * (s + disc);
+  const double quotient = prod / (l3 > 0 ? l3 : 1.0);  // unconditional, as above
+  l2 = l3 > 0 ? quotient : 0.0;
+}
+
 /// Eigenvalues of a positive semi-definite C whose smallest one is well separated (the common case
-/// in plane fitting), without trigonometry: Newton on the characteristic polynomial
-/// p(l) = l^3 - t l^2 + m l - det from l = 0. p is increasing and concave on [0, l1] (p'' = 6 l - 2
-/// t < 0 below t/3 >= l1), so the iterates rise monotonically to l1 with no overshoot,
-/// quadratically once near it; l2, l3 then solve l2 + l3 = t - l1, l2 l3 = m - l1 (t - l1). Returns
-/// false (use the closed form) when C is not PSD or l1 is too close to l2 to converge in a few
-/// steps.
+/// in plane fitting), without trigonometry: Newton on the characteristic polynomial from l = 0.
+/// p is increasing and concave on [0, l1] (p'' = 6 l - 2 t < 0 below t/3 >= l1), so the iterates
+/// rise monotonically to l1 with no overshoot, quadratically once near it; then UpperEigenvalues.
+/// Returns false (use the closed form) when C is not PSD or l1 is too close to l2 to converge in
+/// a few steps.
 bool SymEigenvaluesNewton(const double c[6], double relative_tolerance, double& l1, double& l2,
                           double& l3) {
-  const double t = c[0] + c[3] + c[5];
-  const double m00 = c[3] * c[5] - c[4] * c[4], m11 = c[0] * c[5] - c[2] * c[2],
-               m22 = c[0] * c[3] - c[1] * c[1];
-  const double m = m00 + m11 + m22;
-  const double det =
-      c[0] * m00 + c[1] * (c[2] * c[4] - c[1] * c[5]) + c[2] * (c[1] * c[4] - c[2] * c[3]);
-  if (!(t > 0) || !(m > 0) || det < 0) return false;
+  const CharacteristicPolynomial q = Characteristic(c[0], c[1], c[2], c[3], c[4], c[5]);
+  if (!(q.t > 0) || !(q.m > 0) || q.det < 0) return false;
   double l = 0.0;
   bool converged = false;
   for (int it = 0; it < kNewtonSteps; ++it) {
-    const double p = ((l - t) * l + m) * l - det;
-    const double dp = (3.0 * l - 2.0 * t) * l + m;
-    if (!(dp > 0)) return false;
-    const double step = -p / dp;
+    double slope;
+    const double step = NewtonStep(q, l, slope);
+    if (!(slope > 0)) return false;
     l += step;
-    if (std::abs(step) <= relative_tolerance * t) {
+    if (std::abs(step) <= relative_tolerance * q.t) {
       converged = true;
       break;
     }
   }
   if (!converged) return false;
-  const double s = t - l;         // l2 + l3
-  const double prod = m - l * s;  // l2 l3
-  const double disc = std::sqrt(std::max(0.0, s * s - 4.0 * prod));
-  l3 = 0.5 * (s + disc);
-  l2 = l3 > 0 ? prod / l3 : 0.0;  // not (s - disc) / 2, which cancels when l2 << l3
+  UpperEigenvalues(q, l, l2, l3);
   l1 = l;
   return l1 <= l2 && l2 <= l3;
 }
-
-}  // namespace
-
-namespace {
 
 /// The loop of SymEigenvaluesNewtonBatch. Restrict parameters (distinct arrays) let the compiler
 /// vectorise it without run-time overlap checks.
@@ -110,35 +125,24 @@ void NewtonBatchKernel(const double* __restrict c0, const double* __restrict c1,
                        double relative_tolerance, double* __restrict out1, double* __restrict out2,
                        double* __restrict out3, double* __restrict out_ok) {
   for (int i = 0; i < n; ++i) {
-    // The same arithmetic as SymEigenvaluesNewton, every lane taking all steps: once converged a
-    // step is ~0, and the steps shrink monotonically, so "the last step is small" is "some step
-    // was small". Selects rather than branches, and unconditional divisions.
-    const double t = c0[i] + c3[i] + c5[i];
-    const double m00 = c3[i] * c5[i] - c4[i] * c4[i], m11 = c0[i] * c5[i] - c2[i] * c2[i],
-                 m22 = c0[i] * c3[i] - c1[i] * c1[i];
-    const double m = m00 + m11 + m22;
-    const double det = c0[i] * m00 + c1[i] * (c2[i] * c4[i] - c1[i] * c5[i]) +
-                       c2[i] * (c1[i] * c4[i] - c2[i] * c3[i]);
-    // Flags as doubles (1 or 0), selected like the values: SSE2 vectorises that.
-    double good = (t > 0) ? 1.0 : 0.0;
-    good = (m > 0) ? good : 0.0;
-    good = (det >= 0) ? good : 0.0;
+    // SymEigenvaluesNewton with every lane taking all steps: once converged a step is ~0, and the
+    // steps shrink monotonically, so "the last step is small" is "some step was small". Flags are
+    // doubles (1 or 0) selected like the values, not branches: SSE2 vectorises that.
+    const CharacteristicPolynomial q = Characteristic(c0[i], c1[i], c2[i], c3[i], c4[i], c5[i]);
+    double good = (q.t > 0) ? 1.0 : 0.0;
+    good = (q.m > 0) ? good : 0.0;
+    good = (q.det >= 0) ? good : 0.0;
     double l = 0.0, step = 0.0;
 #pragma GCC unroll 8
     for (int it = 0; it < kNewtonSteps; ++it) {
-      const double p = ((l - t) * l + m) * l - det;
-      const double dp = (3.0 * l - 2.0 * t) * l + m;
-      good = (dp > 0) ? good : 0.0;
-      step = -p / (dp > 0 ? dp : 1.0);
+      double slope;
+      step = NewtonStep(q, l, slope);
+      good = (slope > 0) ? good : 0.0;
       l += step;
     }
-    good = (std::abs(step) <= relative_tolerance * t) ? good : 0.0;
-    const double s = t - l;         // l2 + l3
-    const double prod = m - l * s;  // l2 l3
-    const double disc = std::sqrt(std::max(0.0, s * s - 4.0 * prod));
-    const double hi = 0.5 * (s + disc);
-    const double quotient = prod / (hi > 0 ? hi : 1.0);
-    const double mid = hi > 0 ? quotient : 0.0;
+    good = (std::abs(step) <= relative_tolerance * q.t) ? good : 0.0;
+    double mid, hi;
+    UpperEigenvalues(q, l, mid, hi);
     out1[i] = l;
     out2[i] = mid;
     out3[i] = hi;
@@ -197,9 +201,8 @@ void SmallestEigenvector(const double c[6], SymEigen3& e) {
   e.l1 = std::max(0.0, std::min(rq, e.l2));
 }
 
-void SymEigenvaluesAscending(const double c[6], double& l1, double& l2, double& l3,
-                             double relative_tolerance) {
-  if (!SymEigenvaluesNewton(c, relative_tolerance, l1, l2, l3)) SymEigenvalues3(c, l1, l2, l3);
+void SymEigenvaluesAscending(const double c[6], double& l1, double& l2, double& l3) {
+  if (!SymEigenvaluesNewton(c, 1e-14, l1, l2, l3)) SymEigenvalues3(c, l1, l2, l3);
 }
 
 SymEigen3 SymEigen3Smallest(const double c[6]) {

@@ -85,8 +85,8 @@ bool VisibleHere(const Eigen::Vector3f& p, double s, const RayPlane& own, const 
 /// The ray fit of every region (see DetectionParams::ray_fit), in two steps.
 /// 1. Fit each region along the rays, from its ray sums `sums`.
 /// 2. Crease competition (up to kCreasePasses passes, the first over `border_pixels`): a pixel
-///    4-adjacent to another region moves
-///    there when VisibleHere says its ray sees that region's surface; the regions that changed
+///    4-adjacent to another region moves there when VisibleHere says its ray sees that region's
+///    surface; the regions that changed
 ///    are fitted again, and the next pass looks only around the pixels that moved. Growth admits
 ///    a pixel by the paper's orthogonal distance, gamma + gamma_sigmas sigma_n, so at a crease a
 ///    region takes a strip of the neighbouring surface as wide as the noise; on a narrow or

@@ -145,22 +145,21 @@ void SymEigenvalues3(const double c[6], double& l1, double& l2, double& l3);
 /// (the best-conditioned pair), and l1 is refined as the Rayleigh quotient v1^T C v1, which is
 /// accurate to round-off even when l1 << l3.
 SymEigen3 SymEigen3Smallest(const double c[6]);
-/// The two halves of SymEigen3Smallest, for callers that need the eigenvector only sometimes
-/// (GBRG's classification): the eigenvalues, ascending (Newton or the closed form, as above;
-/// Newton stops at a step below relative_tolerance times the trace)...
-void SymEigenvaluesAscending(const double c[6], double& l1, double& l2, double& l3,
-                             double relative_tolerance = 1e-14);
-/// The Newton part of SymEigenvaluesAscending for many matrices at once: matrix i is
-/// {c[0][i], ..., c[5][i]} (upper triangle, structure of arrays). A fixed number of steps and no
-/// branches let the compiler vectorise the loop and overlap the divisions of different matrices,
-/// where one matrix at a time waits on each division in turn. ok[i] = 0 (else 1) where Newton does
-/// not apply or converge within its steps: use SymEigenvalues3 there. Elsewhere the eigenvalues
-/// equal SymEigenvaluesAscending's to round-off.
-void SymEigenvaluesNewtonBatch(const double* const c[6], int n, double relative_tolerance,
-                               double* l1, double* l2, double* l3, double* ok);
+/// The two halves of SymEigen3Smallest, for callers that need the eigenvector only sometimes:
+/// the eigenvalues, ascending (Newton or the closed form, as above; Newton stops at a step below
+/// 1e-14 of the trace)...
+void SymEigenvaluesAscending(const double c[6], double& l1, double& l2, double& l3);
 /// ...and, given them in e, the eigenvector of the smallest (cross product of two rows of
 /// C - l1 I) with l1 refined as its Rayleigh quotient.
 void SmallestEigenvector(const double c[6], SymEigen3& e);
+/// The Newton half of SymEigenvaluesAscending for many matrices at once (GBRG's classification),
+/// stopping at a step below relative_tolerance times the trace. Matrix i is {c[0][i], ...,
+/// c[5][i]} (upper triangle, structure of arrays). A fixed number of steps and no branches let
+/// the compiler vectorise the loop and overlap the divisions of different matrices, where one
+/// matrix at a time waits on each division in turn. ok[i] = 0 (else 1) where Newton does not
+/// apply or converge within its steps: use SymEigenvalues3 there.
+void SymEigenvaluesNewtonBatch(const double* const c[6], int n, double relative_tolerance,
+                               double* l1, double* l2, double* l3, double* ok);
 
 /// Plane fitted to moment sums (eq. 3-6): unit normal oriented so that d = n.m >= 0.
 struct FastFit {
