@@ -1,12 +1,11 @@
 #include "bench_odometry.hpp"
 
-#include <nlohmann/json.hpp>
-
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <nlohmann/json.hpp>
 
 #include "bench_common.hpp"
 #include "cli_common.hpp"
@@ -38,12 +37,66 @@ double MsSince(Clock::time_point start) {
 /// One method's run over the sequence.
 struct OdometryRun {
   std::string name;
-  ds::Trajectory trajectory;  ///< T_world_sensor per frame, first frame at its ground truth
+  ds::Trajectory trajectory;     ///< T_world_sensor per frame, first frame at its ground truth
   std::vector<double> times_ms;  ///< per frame after the first
   int failures = 0;              ///< frames where the method fell back to the prior
   ds::RpeResult rpe_frame, rpe_second;
   bool evaluated = false;
 };
+
+/// What the plane registration said of the directions it could not see (ours only).
+struct DegeneracyReport {
+  int frames = 0;                  ///< frames with some undetermined direction
+  int filled_icp = 0;              ///< of those, filled by point-to-plane alignment
+  int filled_prior = 0;            ///< of those, filled (in part) from the constant-velocity prior
+  int translation_directions = 0;  ///< undetermined translation axes over all frames
+  Eigen::Vector3d abs_world_axis_sum = Eigen::Vector3d::Zero();  ///< sum of their |axis|, world
+
+  void Add(const registration::OdometryStep& step, const Pose& T_world_prev) {
+    const registration::RegistrationResult& r = step.registration;
+    if (!r.degenerate) return;
+    ++frames;
+    filled_icp += r.used_icp ? 1 : 0;
+    filled_prior += r.used_prior ? 1 : 0;
+    for (const registration::Vector6d& d : r.degenerate_directions) {
+      if (d.head<3>().norm() < 0.5) continue;  // a rotation axis
+      ++translation_directions;
+      abs_world_axis_sum += (T_world_prev.linear() * d.head<3>()).cwiseAbs();
+    }
+  }
+};
+
+/// Drift over the whole run: the relative pose error between the first and the last frame with
+/// ground truth, E = (G_a^-1 G_b)^-1 (P_a^-1 P_b), its translation turned into the world axes by
+/// G_b [m]; and the length of the ground-truth path between them [m]. `ground_truth` holds the
+/// frames' own poses, so its stamps are the estimate's.
+struct EndPointDrift {
+  Eigen::Vector3d error = Eigen::Vector3d::Zero();
+  double path_length = 0.0;
+};
+
+EndPointDrift DriftOverRun(const ds::Trajectory& ground_truth, const ds::Trajectory& estimate) {
+  EndPointDrift drift;
+  if (ground_truth.size() < 2) return drift;
+  auto find = [&](double stamp) -> const Pose* {
+    for (std::size_t i = 0; i < estimate.size(); ++i) {
+      if (estimate.stamps[i] == stamp) return &estimate.poses[i];
+    }
+    return nullptr;
+  };
+  const Pose* Pa = find(ground_truth.stamps.front());
+  const Pose* Pb = find(ground_truth.stamps.back());
+  if (Pa == nullptr || Pb == nullptr) return drift;
+  const Pose& Ga = ground_truth.poses.front();
+  const Pose& Gb = ground_truth.poses.back();
+  const Pose E = (Ga.inverse() * Gb).inverse() * (Pa->inverse() * *Pb);
+  drift.error = Gb.linear() * E.translation();
+  for (std::size_t i = 1; i < ground_truth.size(); ++i) {
+    drift.path_length +=
+        (ground_truth.poses[i].translation() - ground_truth.poses[i - 1].translation()).norm();
+  }
+  return drift;
+}
 
 /// evo RPE (E = inv(Q_i^-1 Q_j) (P_i^-1 P_j), nearest-stamp association within 10 ms).
 ds::RpeResult Rpe(const ds::Trajectory& gt, const ds::Trajectory& est, int delta_frames,
@@ -59,8 +112,7 @@ ds::RpeResult Rpe(const ds::Trajectory& gt, const ds::Trajectory& est, int delta
 
 int RunOdometryBench(const std::string& sequence_path, const Config& config,
                      const OdometryOptions& options) {
-  const auto sequence =
-      ds::OpenSequence(sequence_path, config.Get<ds::SensorConfig>("sensor"));
+  const auto sequence = ds::OpenSequence(sequence_path, config.Get<ds::SensorConfig>("sensor"));
   std::size_t n = sequence->Size();
   if (options.max_frames > 0) n = std::min<std::size_t>(n, options.max_frames);
   if (n < 2) throw IoError(sequence_path, "odometry needs at least two frames");
@@ -76,6 +128,7 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
   registration::PlaneOdometry odometry(odometry_config, T_world_first);
 
   OdometryRun ours;
+  DegeneracyReport degeneracy;
   ours.name = "planes(" + detector->Name() + ")";
 #ifdef PLANESLAM_HAVE_PCL_BASELINES
   pcl_baselines::GicpConfig gicp_config;
@@ -94,11 +147,12 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
     const ds::Frame frame = sequence->Load(i);
     if (frame.T_world_sensor_gt) ground_truth.Add(frame.timestamp, *frame.T_world_sensor_gt);
 
+    const Pose T_world_prev = odometry.T_world_sensor();
     auto t = Clock::now();
-    const detection::Segmentation segmentation = detector->Detect(frame.cloud);
     const registration::OdometryStep step_ours =
-        odometry.Process(frame.timestamp, frame.cloud, segmentation);
+        odometry.Track(frame.timestamp, frame.cloud, *detector);
     const double ours_ms = MsSince(t);
+    degeneracy.Add(step_ours, T_world_prev);
     ours.trajectory.Add(frame.timestamp, step_ours.T_world_sensor);
     if (i > 0) {
       ours.times_ms.push_back(ours_ms);
@@ -145,8 +199,10 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
 
   std::printf("bench odometry: %s, %zu frames, delta 1 s = %d frames (median dt %.4f s)\n",
               sequence_path.c_str(), n, second_frames, dt);
-  std::printf("ours: detector %s + PlaneOdometry (frame to frame, constant-velocity prior)\n",
-              detector->Name().c_str());
+  std::printf(
+      "ours: detector %s at 1/%d resolution + PlaneOdometry (frame to frame, constant-velocity "
+      "prior)\n",
+      detector->Name().c_str(), odometry_config.decimation);
 #ifdef PLANESLAM_HAVE_PCL_BASELINES
   std::printf("pcl_gicp: VoxelGrid %.3f m, max correspondence %.3f m, k=%d, %d iterations\n",
               gicp_config.voxel_size, gicp_config.max_correspondence_distance,
@@ -165,12 +221,32 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
                   Median(run->times_ms), run->failures, "-", "-", "-", "-");
     }
   }
+  std::printf(
+      "\n%s: degenerate on %d of %zu frames (%d filled by point-to-plane alignment, %d "
+      "from the prior)",
+      ours.name.c_str(), degeneracy.frames, n - 1, degeneracy.filled_icp, degeneracy.filled_prior);
+  if (degeneracy.translation_directions > 0) {
+    const Eigen::Vector3d axis = degeneracy.abs_world_axis_sum / degeneracy.translation_directions;
+    std::printf("; mean |undetermined translation axis| in the world (%.2f, %.2f, %.2f)", axis.x(),
+                axis.y(), axis.z());
+  }
+  std::printf("\n");
+  if (ground_truth.size() >= 2) {
+    std::printf(
+        "drift from the first to the last frame with ground truth (relative pose error in world "
+        "axes x y z [cm]) over %.2f m of path:\n",
+        DriftOverRun(ground_truth, ours.trajectory).path_length);
+    for (const OdometryRun* run : runs) {
+      const Eigen::Vector3d e = 100.0 * DriftOverRun(ground_truth, run->trajectory).error;
+      std::printf("  %-16s %8.2f %8.2f %8.2f\n", run->name.c_str(), e.x(), e.y(), e.z());
+    }
+  }
   if (runs.size() == 2) {
     std::printf("\nspeed ratio (median ms pcl_gicp / ours): %.1fx\n",
                 Median(runs[1]->times_ms) / Median(runs[0]->times_ms));
   }
   std::printf(
-      "\nms/frame: median; ours = detection + PlaneOdometry::Process, GICP = voxel grid + "
+      "\nms/frame: median; ours = decimation + detection + PlaneOdometry, GICP = voxel grid + "
       "covariances + alignment.\nRPE with evo's semantics (E = inv(Q_i^-1 Q_j)(P_i^-1 P_j), "
       "association within 10 ms), translation and rotation rmse.\n");
 

@@ -125,6 +125,10 @@ void VisitOdometry(FieldVisitor& v, registration::PlaneOdometryConfig& c) {
           "[m] error of a plane's points that does not average out (depth bias, edge pixels): a "
           "narrow plane is uncertain by this over its width (registration; SLAM tracking uses 0)",
           0.0, 1.0);
+  v.Field("decimation", c.decimation,
+          "detect and register planes on every n-th row and column (1 = full resolution; "
+          "Kinect-class depth: 2)",
+          1, 16);
 }
 
 std::vector<std::string> ValidateOdometry(const registration::PlaneOdometryConfig& c) {
@@ -136,6 +140,7 @@ std::vector<std::string> ValidateOdometry(const registration::PlaneOdometryConfi
   scalars.max_prior_gap = c.max_prior_gap;
   scalars.velocity_window = c.velocity_window;
   scalars.systematic_point_sigma = c.systematic_point_sigma;
+  scalars.decimation = c.decimation;
   return scalars.Validate();
 }
 

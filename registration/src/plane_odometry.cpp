@@ -15,6 +15,7 @@ std::vector<std::string> PlaneOdometryConfig::Validate() const {
   if (!(max_prior_gap > 0)) p.push_back("max_prior_gap must be > 0");
   if (!(velocity_window >= 0)) p.push_back("velocity_window must be >= 0");
   if (!(systematic_point_sigma >= 0)) p.push_back("systematic_point_sigma must be >= 0");
+  if (decimation < 1 || decimation > 16) p.push_back("decimation must be in [1, 16]");
   return p;
 }
 
@@ -56,13 +57,26 @@ MotionPrior PlaneOdometry::Predict(double timestamp) const {
   return prior;
 }
 
+OdometryStep PlaneOdometry::Track(double timestamp, const datasets::OrganizedCloud& cloud,
+                                  const detection::PlaneDetector& detector) {
+  if (config_.decimation == 1) return Process(timestamp, cloud, detector.Detect(cloud));
+  datasets::OrganizedCloud decimated = datasets::Decimate(cloud, config_.decimation);
+  OdometryStep step = Step(timestamp, detector.Detect(decimated).planes, &decimated);
+  prev_cloud_ = std::move(decimated);
+  return step;
+}
+
 OdometryStep PlaneOdometry::Process(double timestamp, const datasets::OrganizedCloud& cloud,
                                     const detection::Segmentation& segmentation) {
-  return Step(timestamp, segmentation.planes, &cloud);
+  OdometryStep step = Step(timestamp, segmentation.planes, &cloud);
+  prev_cloud_ = cloud;
+  return step;
 }
 
 OdometryStep PlaneOdometry::Process(double timestamp, const std::vector<detection::Plane>& planes) {
-  return Step(timestamp, planes, nullptr);
+  OdometryStep step = Step(timestamp, planes, nullptr);
+  prev_cloud_ = {};
+  return step;
 }
 
 OdometryStep PlaneOdometry::Step(double timestamp, const std::vector<detection::Plane>& planes,
@@ -118,12 +132,7 @@ OdometryStep PlaneOdometry::Step(double timestamp, const std::vector<detection::
   trajectory_.Add(timestamp, T_world_sensor_);
   have_prev_ = true;
   prev_stamp_ = timestamp;
-  prev_planes_ = planes;
-  if (cloud) {
-    prev_cloud_ = *cloud;
-  } else {
-    prev_cloud_ = {};
-  }
+  prev_planes_ = planes;  // the caller keeps the cloud as prev_cloud_ (Track moves its own)
   return step;
 }
 

@@ -5,6 +5,7 @@
 
 #include <random>
 
+#include "planeslam/detection/plane_detector.hpp"
 #include "registration/corridor_scene.hpp"
 
 namespace planeslam::registration {
@@ -116,6 +117,55 @@ TEST(PlaneOdometry, CorridorAxisComesFromThePointsWhenThePriorIsWrong) {
   }
 }
 
+/// Returns the planes it is handed for the next frame and remembers the size of the cloud it saw.
+class ScriptedDetector : public detection::PlaneDetector {
+ public:
+  std::string Name() const override { return "scripted"; }
+  detection::Segmentation Detect(const datasets::OrganizedCloud& cloud) const override {
+    seen_width = cloud.width;
+    seen_height = cloud.height;
+    detection::Segmentation seg;
+    seg.width = cloud.width;
+    seg.height = cloud.height;
+    seg.planes = next_planes;
+    return seg;
+  }
+  std::vector<detection::Plane> next_planes;
+  mutable int seen_width = 0, seen_height = 0;
+};
+
+TEST(PlaneOdometry, TrackDetectsAndAlignsOnTheDecimatedCloud) {
+  // The accelerating corridor again, through Track at half resolution: the detector sees the
+  // 80 x 60 grid, and the corridor axis still comes from the points of the decimated clouds.
+  std::mt19937 rng(8);
+  const test::CorridorScene scene = test::MakeCorridor(true);
+  const datasets::PinholeIntrinsics k = test::SmallCamera();
+  auto pose = [](int i) {
+    Pose T = Pose::Identity();
+    T.linear() = test::LookAlongX() * ExpSO3(Eigen::Vector3d(0.0, 0.01 * i, 0.0));
+    T.translation() << 0.02 * i * i, 0.1, 0.0;
+    return T;
+  };
+  PlaneOdometryConfig config;
+  config.point_to_plane.pixel_stride = 1;
+  config.decimation = 2;
+  PlaneOdometry odo(config, pose(0));
+  ScriptedDetector detector;
+  for (int i = 0; i < 6; ++i) {
+    detector.next_planes = test::CorridorPlanesInCamera(scene, pose(i));
+    const OdometryStep step =
+        odo.Track(i * 0.1, test::RayCast(scene, k, pose(i), 0.001, rng), detector);
+    EXPECT_EQ(detector.seen_width, 80);
+    EXPECT_EQ(detector.seen_height, 60);
+    if (i > 0) {
+      EXPECT_TRUE(step.registration.degenerate);
+      EXPECT_TRUE(step.registration.used_icp) << "frame " << i;
+    }
+    EXPECT_LT(test::TranslationError(step.T_world_sensor, pose(i)), 0.005) << "frame " << i;
+    EXPECT_LT(test::RotationError(step.T_world_sensor, pose(i)), 1e-6) << "frame " << i;
+  }
+}
+
 TEST(PlaneOdometry, ResetStartsOver) {
   PlaneOdometry odo;
   odo.Process(0.0, RoomPlanes(PathPose(0)));
@@ -133,7 +183,8 @@ TEST(PlaneOdometry, ConfigValidation) {
   c.registration.max_translation_sigma = -1;
   c.association.max_candidates_per_plane = 0;
   c.prior_rotation_sigma = 0;
-  EXPECT_EQ(c.Validate().size(), 3u);
+  c.decimation = 0;
+  EXPECT_EQ(c.Validate().size(), 4u);
 }
 
 }  // namespace

@@ -58,4 +58,14 @@ struct OrganizedCloud {
   }
 };
 
+/// The cloud at 1/factor resolution: every factor-th row and column, starting with the first
+/// (picked, not averaged: an average across a depth edge would invent points in mid-air). The
+/// grid stays organized, so a pinhole cloud keeps a pinhole grid with DecimateIntrinsics.
+/// Requires 1 <= factor <= 16 (CheckError otherwise); factor 1 returns a copy.
+OrganizedCloud Decimate(const OrganizedCloud& cloud, int factor);
+
+/// Intrinsics of the pixel grid Decimate keeps: pixel (u, v) of the result is pixel (f u, f v) of
+/// the full image, so fx, fy, cx, cy scale by 1/f and the size rounds up.
+PinholeIntrinsics DecimateIntrinsics(const PinholeIntrinsics& intrinsics, int factor);
+
 }  // namespace planeslam::datasets
