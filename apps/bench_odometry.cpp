@@ -121,8 +121,9 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
   // registration with the constant-velocity prior, point-to-plane fill of degenerate directions).
   const std::string method =
       options.method.empty() ? config.Get<DetectionSection>("detection").method : options.method;
-  const std::unique_ptr<detection::PlaneDetector> detector = MakeDetector(method, config);
   const registration::PlaneOdometryConfig odometry_config = OdometryConfigFrom(config);
+  const std::unique_ptr<detection::PlaneDetector> detector =
+      MakeDetector(method, config, odometry_config.decimation);
   const std::optional<Pose> first_gt = sequence->GroundTruth(0);
   const Pose T_world_first = first_gt ? *first_gt : Pose::Identity();
   registration::PlaneOdometry odometry(odometry_config, T_world_first);

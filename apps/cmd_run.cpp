@@ -93,7 +93,8 @@ class RunCommand : public Command {
       sequence = ds::OpenSequence(sequence_, config.Get<ds::SensorConfig>("sensor"));
       input_name = sequence_;
     }
-    const std::unique_ptr<detection::PlaneDetector> detector = MakeDetector(method, config);
+    const std::unique_ptr<detection::PlaneDetector> detector =
+        MakeDetector(method, config, run.decimation);
     std::size_t frames = sequence->Size();
     std::vector<std::size_t> indices;
     for (std::size_t i = 0; i < frames; i += run.frame_stride) indices.push_back(i);
@@ -126,9 +127,10 @@ class RunCommand : public Command {
     for (std::size_t i : indices) {
       if (StopRequested()) break;
       auto t = Clock::now();
-      const ds::Frame frame = sequence->Load(i);
+      ds::Frame frame = sequence->Load(i);
       time_load += MsSince(t);
       t = Clock::now();
+      if (run.decimation > 1) frame.cloud = ds::Decimate(frame.cloud, run.decimation);
       const detection::Segmentation segmentation = detector->Detect(frame.cloud);
       time_detect += MsSince(t);
       const mapping::SlamFrameResult result =

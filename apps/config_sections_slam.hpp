@@ -13,6 +13,9 @@ struct RunConfig {
   bool start_at_ground_truth = true;      ///< first pose = ground truth's when known
   int max_frames = 0;                     ///< [frames] 0 = all
   int frame_stride = 1;                   ///< [frames]
+  /// Detect and track on every n-th row and column of each frame (datasets::Decimate); as
+  /// odometry.decimation, for Kinect-class depth whose neighbouring pixels share their errors.
+  int decimation = 1;
   double ate_max_time_difference = 0.01;  ///< [s] evo's default t_max_diff
 };
 

@@ -1,5 +1,8 @@
 #include "detector_factory.hpp"
 
+#include <algorithm>
+#include <cmath>
+
 #include "planeslam/datasets/errors.hpp"
 
 namespace planeslam::app {
@@ -30,8 +33,11 @@ void ThrowIfInvalid(const std::string& method, std::vector<std::string> problems
 }  // namespace
 
 std::unique_ptr<detection::PlaneDetector> MakeDetector(const std::string& method,
-                                                       const Config& config) {
+                                                       const Config& config, int decimation) {
+  PLANESLAM_CHECK(decimation >= 1, "decimation " << decimation);
   detection::DetectionParams params = DetectionParamsFrom(config);
+  params.theta = std::max(1, static_cast<int>(std::lround(static_cast<double>(params.theta) /
+                                                          (decimation * decimation))));
   detection::GridParams grid = config.Get<detection::GridParams>("grid");
   detection::PointParams point = config.Get<detection::PointParams>("point");
   std::string name = method;

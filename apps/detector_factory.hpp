@@ -29,9 +29,11 @@ std::vector<std::string> DetectorMethods();
 /// The shared thresholds of `config` (section "detection") with the model resolved.
 detection::DetectionParams DetectionParamsFrom(const Config& config);
 
-/// A detector for `method` configured from `config`. Throws ConfigError naming the method and the
-/// valid ones when `method` is unknown, or the problem when the parameters are invalid.
+/// A detector for `method` configured from `config`, for clouds decimated by `decimation`
+/// (datasets::Decimate): detection.theta counts full-resolution pixels, so such a detector needs
+/// theta / decimation^2 of its own. Throws ConfigError naming the method and the valid ones when
+/// `method` is unknown, or the problem when the parameters are invalid.
 std::unique_ptr<detection::PlaneDetector> MakeDetector(const std::string& method,
-                                                       const Config& config);
+                                                       const Config& config, int decimation = 1);
 
 }  // namespace planeslam::app
