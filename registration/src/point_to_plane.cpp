@@ -168,17 +168,27 @@ PointToPlaneResult AlignPointToPlane(const datasets::OrganizedCloud& prev,
         Vector6d j6;
         j6.head<3>() = n;
         j6.tail<3>() = rp.cross(n);
-        const Eigen::VectorXd jy = D.transpose() * j6;
+        Eigen::VectorXd jy = D.transpose() * j6;
         const double w = std::abs(r) <= config.huber_delta ? 1.0 : config.huber_delta / std::abs(r);
+        const double lever = std::max(rp.norm(), 1e-9);
+        for (int i = 0; i < k; ++i) {
+          const bool translation = IsTranslation(D.col(i));
+          const double facing = translation ? std::abs(jy(i)) : std::abs(jy(i)) / lever;
+          if (facing > 0.5) {
+            ++support[i];
+          } else if (translation) {
+            // A pair informs a translation only when its normal faces it. On surfaces parallel
+            // to it (a corridor's walls, seen from inside) the noise of the normals gives them
+            // a share of it, information without signal that holds the estimate at its start
+            // (synthetic corridor, 10 m: drift along the axis -64 -> -15 cm; room RPE per frame
+            // 0.15 -> 0.18 cm). Rotations keep every pair (room: 0.085 instead of 0.073 deg).
+            jy(i) = 0.0;
+          }
+        }
         H.noalias() += w * jy * jy.transpose();
         g.noalias() += w * jy * r;
         ++count;
         sum_sq += r * r;
-        const double lever = std::max(rp.norm(), 1e-9);
-        for (int i = 0; i < k; ++i) {
-          const double facing = IsTranslation(D.col(i)) ? std::abs(jy(i)) : std::abs(jy(i)) / lever;
-          support[i] += facing > 0.5 ? 1 : 0;
-        }
       }
     }
     res.iterations = it + 1;

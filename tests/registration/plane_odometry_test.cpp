@@ -5,6 +5,8 @@
 
 #include <random>
 
+#include "planeslam/datasets/synthetic_sequence.hpp"
+#include "planeslam/detection/grid_region_growing.hpp"
 #include "planeslam/detection/plane_detector.hpp"
 #include "registration/corridor_scene.hpp"
 
@@ -164,6 +166,38 @@ TEST(PlaneOdometry, TrackDetectsAndAlignsOnTheDecimatedCloud) {
     EXPECT_LT(test::TranslationError(step.T_world_sensor, pose(i)), 0.005) << "frame " << i;
     EXPECT_LT(test::RotationError(step.T_world_sensor, pose(i)), 1e-6) << "frame " << i;
   }
+}
+
+TEST(PlaneOdometry, SyntheticCorridorAxisIsNotHeldAtTheStartingVelocity) {
+  // The rendered corridor (Kinect-like noise): its planes never fix the axis, only pipes and
+  // lamps across it do, from metres away. The odometry starts with no velocity, the camera
+  // walks at 0.5 m/s, so the fill must find the motion from those few facing points; the
+  // noisy normals of the walls must not hold it at the starting guess.
+  const datasets::SyntheticSequence seq(
+      datasets::SyntheticConfig::ForScene(datasets::SceneKind::kCorridor));
+  detection::DetectionParams params;  // as config/detection_synthetic.yaml
+  params.gamma = 0.007;
+  params.epsilon_sigmas = 1.0;
+  params.epsilon_count_sigmas = 1.5;
+  params.merge_disjoint = true;
+  const detection::GridRegionGrowing detector(params, detection::GridParams{});
+  const int frames = 40;
+  PlaneOdometry odo({}, *seq.GroundTruth(0));
+  int degenerate = 0;
+  for (int i = 0; i < frames; ++i) {
+    const datasets::Frame f = seq.Load(i);
+    const OdometryStep step = odo.Track(f.timestamp, f.cloud, detector);
+    degenerate += step.registration.degenerate ? 1 : 0;
+  }
+  EXPECT_EQ(degenerate, frames - 1);
+  const Pose gt = *seq.GroundTruth(frames - 1);
+  const double walked = (gt.translation() - seq.GroundTruth(0)->translation()).norm();
+  const double along = odo.T_world_sensor().translation().x() - gt.translation().x();
+  RecordProperty("along_axis_error_m", std::to_string(along));
+  // Measured: 0.32 m short of 0.67 m walked; 0.50 m short when the walls' pairs also inform the
+  // axis. Still short by half: the normals of pipes metres away are noisy, which attenuates the
+  // motion the alignment sees; over the scene's whole 10 m run the drift is 0.15 m (bench).
+  EXPECT_LT(std::abs(along), 0.55 * walked) << "walked " << walked << " m";
 }
 
 TEST(PlaneOdometry, ResetStartsOver) {
