@@ -49,8 +49,8 @@ struct PlaneOdometryConfig {
   /// pixels (the disparity comes from correlation windows), so half resolution keeps most of
   /// its plane information at a quarter of the detection time; config/tum_fr3.yaml uses 2 (TUM
   /// fr3: 10.0 -> 3.2 ms a frame, RPE at 1 s 1.63 -> 1.08 cm). The synthetic sensors' noise is
-  /// independent per pixel, and there full resolution pays (room RPE per frame 0.15 cm / 0.072
-  /// deg at 1, 0.31 cm / 0.086 deg at 2).
+  /// independent per pixel, and there full resolution pays (room RPE per frame 0.18 cm / 0.073
+  /// deg at 1, 0.43 cm / 0.086 deg at 2).
   int decimation = 1;
 
   /// Problems in this struct and the nested ones, empty when fine.
