@@ -274,6 +274,17 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
                         {"rot_rmse_deg", run->rpe_second.rot_stats_deg.rmse},
                         {"pairs", run->rpe_second.trans_stats.count}};
       }
+      if (ground_truth.size() >= 2) {
+        const EndPointDrift drift = DriftOverRun(ground_truth, run->trajectory);
+        j["drift_world_m"] = {drift.error.x(), drift.error.y(), drift.error.z()};
+        j["path_length_m"] = drift.path_length;
+      }
+      if (run == &ours) {
+        j["decimation"] = odometry_config.decimation;
+        j["degenerate_frames"] = degeneracy.frames;
+        j["filled_by_point_to_plane"] = degeneracy.filled_icp;
+        j["filled_from_prior"] = degeneracy.filled_prior;
+      }
       out.push_back(std::move(j));
     }
     ds::WriteFileAtomic(options.json_path, out.dump(2) + "\n");

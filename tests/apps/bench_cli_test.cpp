@@ -108,6 +108,9 @@ TEST(BenchCli, OdometryOnACorridorReportsItsDegeneracyAndWritesBothTrajectories)
   ASSERT_GE(j.size(), 1u);
   EXPECT_EQ(j[0]["method"], "planes(grid3)");
   EXPECT_EQ(j[0]["frames"], 12);
+  EXPECT_EQ(j[0]["degenerate_frames"], 11);
+  EXPECT_EQ(j[0]["filled_by_point_to_plane"], 11);
+  EXPECT_EQ(j[0]["drift_world_m"].size(), 3u);
   for (const char* key : {"rpe_1_frame", "rpe_1_s"}) {
     ASSERT_TRUE(j[0].contains(key)) << j.dump();
     EXPECT_TRUE(std::isfinite(j[0][key]["trans_rmse_m"].get<double>())) << j.dump();
