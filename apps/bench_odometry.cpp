@@ -34,6 +34,13 @@ double MsSince(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
+/// Drift over the whole run (DriftOverRun): the error in world axes [m] and the length of the
+/// ground-truth path [m].
+struct EndPointDrift {
+  Eigen::Vector3d error = Eigen::Vector3d::Zero();
+  double path_length = 0.0;
+};
+
 /// One method's run over the sequence.
 struct OdometryRun {
   std::string name;
@@ -42,6 +49,7 @@ struct OdometryRun {
   int failures = 0;              ///< frames where the method fell back to the prior
   ds::RpeResult rpe_frame, rpe_second;
   bool evaluated = false;
+  EndPointDrift drift;  ///< set when there are two or more frames with ground truth
 };
 
 /// What the plane registration said of the directions it could not see (ours only).
@@ -66,15 +74,10 @@ struct DegeneracyReport {
   }
 };
 
-/// Drift over the whole run: the relative pose error between the first and the last frame with
-/// ground truth, E = (G_a^-1 G_b)^-1 (P_a^-1 P_b), its translation turned into the world axes by
-/// G_b [m]; and the length of the ground-truth path between them [m]. `ground_truth` holds the
-/// frames' own poses, so its stamps are the estimate's.
-struct EndPointDrift {
-  Eigen::Vector3d error = Eigen::Vector3d::Zero();
-  double path_length = 0.0;
-};
-
+/// The relative pose error between the first and the last frame with ground truth,
+/// E = (G_a^-1 G_b)^-1 (P_a^-1 P_b), its translation turned into the world axes by G_b, and the
+/// length of the ground-truth path between them. `ground_truth` holds the frames' own poses, so
+/// its stamps are the estimate's.
 EndPointDrift DriftOverRun(const ds::Trajectory& ground_truth, const ds::Trajectory& estimate) {
   EndPointDrift drift;
   if (ground_truth.size() < 2) return drift;
@@ -232,13 +235,15 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
                 axis.y(), axis.z());
   }
   std::printf("\n");
-  if (ground_truth.size() >= 2) {
+  const bool have_drift = ground_truth.size() >= 2;
+  if (have_drift) {
+    for (OdometryRun* run : runs) run->drift = DriftOverRun(ground_truth, run->trajectory);
     std::printf(
         "drift from the first to the last frame with ground truth (relative pose error in world "
         "axes x y z [cm]) over %.2f m of path:\n",
-        DriftOverRun(ground_truth, ours.trajectory).path_length);
+        ours.drift.path_length);
     for (const OdometryRun* run : runs) {
-      const Eigen::Vector3d e = 100.0 * DriftOverRun(ground_truth, run->trajectory).error;
+      const Eigen::Vector3d e = 100.0 * run->drift.error;
       std::printf("  %-16s %8.2f %8.2f %8.2f\n", run->name.c_str(), e.x(), e.y(), e.z());
     }
   }
@@ -274,10 +279,9 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
                         {"rot_rmse_deg", run->rpe_second.rot_stats_deg.rmse},
                         {"pairs", run->rpe_second.trans_stats.count}};
       }
-      if (ground_truth.size() >= 2) {
-        const EndPointDrift drift = DriftOverRun(ground_truth, run->trajectory);
-        j["drift_world_m"] = {drift.error.x(), drift.error.y(), drift.error.z()};
-        j["path_length_m"] = drift.path_length;
+      if (have_drift) {
+        j["drift_world_m"] = {run->drift.error.x(), run->drift.error.y(), run->drift.error.z()};
+        j["path_length_m"] = run->drift.path_length;
       }
       if (run == &ours) {
         j["decimation"] = odometry_config.decimation;

@@ -132,6 +132,10 @@ PointToPlaneResult AlignPointToPlane(const datasets::OrganizedCloud& prev,
     }
   }
   const int s = config.pixel_stride;
+  // Per direction, once: translation or rotation (it decides what "facing" means per pair).
+  std::vector<char> is_translation(k);
+  for (int i = 0; i < k; ++i) is_translation[i] = IsTranslation(D.col(i));
+  Eigen::VectorXd jy(k);  // a pair's Jacobian along the directions, reused (no allocation per pair)
   Eigen::VectorXd y = Eigen::VectorXd::Zero(k);
   for (int it = 0; it < config.max_iterations; ++it) {
     const Pose T = BoxPlus(T_init, D * y);
@@ -168,11 +172,11 @@ PointToPlaneResult AlignPointToPlane(const datasets::OrganizedCloud& prev,
         Vector6d j6;
         j6.head<3>() = n;
         j6.tail<3>() = rp.cross(n);
-        Eigen::VectorXd jy = D.transpose() * j6;
+        jy.noalias() = D.transpose() * j6;
         const double w = std::abs(r) <= config.huber_delta ? 1.0 : config.huber_delta / std::abs(r);
         const double lever = std::max(rp.norm(), 1e-9);
         for (int i = 0; i < k; ++i) {
-          const bool translation = IsTranslation(D.col(i));
+          const bool translation = is_translation[i];
           const double facing = translation ? std::abs(jy(i)) : std::abs(jy(i)) / lever;
           if (facing > 0.5) {
             ++support[i];
