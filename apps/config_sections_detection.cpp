@@ -9,11 +9,11 @@ namespace {
 
 void VisitDetection(FieldVisitor& v, DetectionSection& c) {
   auto& p = c.params;
-  v.Field(
-      "method", c.method,
-      "detector: grid (GBRG, grid.cell_size), grid3/4/5, grid-paper (no refinement/merge/ray fit), "
-      "point (PBRG), point-exact (refit per point), point-paper (no merge/ray fit)",
-      DetectorMethods());
+  v.Field("method", c.method,
+          "detector: grid (GBRG, grid.cell_size), grid3/4/5, grid-paper (refit per join, no "
+          "refinement/merge/ray fit), "
+          "point (PBRG), point-exact (refit per point), point-paper (no merge/ray fit)",
+          DetectorMethods());
   v.Field("threshold_model", c.threshold_model,
           "constant: the paper's fixed thresholds; depth: thresholds grow with the sensor noise "
           "sigma(z) = sigma0 + sigma_z2 z^2 along the ray (depth cameras)",
@@ -78,6 +78,10 @@ void VisitGrid(FieldVisitor& v, detection::GridParams& c) {
           0, 1024);
   v.Field("alpha", c.alpha, "linear grid when l2 <= alpha l3 (paper: 0.006)", 1e-9, 0.999999);
   v.Field("beta", c.beta, "planar grid when l1 <= beta l2 (paper: 0.4)", 1e-9, 0.999999);
+  v.Field("refit_interval", c.refit_interval,
+          "1 = refit the plane on every join (paper); N = every N joins; 0 = adaptive (every "
+          "N/64 joins of an N-grid region, exact MSE test)",
+          0, 1000000);
 }
 
 std::vector<std::string> ValidateGrid(const detection::GridParams& c) { return c.Validate(); }

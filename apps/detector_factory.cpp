@@ -49,6 +49,7 @@ std::unique_ptr<detection::PlaneDetector> MakeDetector(const std::string& method
     }
     if (method == "grid") name = "grid" + std::to_string(grid.cell_size);
     if (method == "grid-paper") {
+      grid.refit_interval = 1;
       params.refine_boundary = false;
       params.merge_regions = false;
       params.ray_fit = false;

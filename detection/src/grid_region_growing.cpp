@@ -50,9 +50,9 @@ struct Workspace {
   std::vector<MomentSums> regions;
   std::vector<FastFit> fits;
   std::vector<std::int32_t> labels;
-  std::vector<internal::RaySums> grid_rays;  ///< ray sums of each grid's pixels (ray fit)
-  std::vector<internal::RaySums> rays;       ///< ray sums of each region
-  std::vector<int> edge_grids;               ///< grids with a neighbour outside their region
+  std::vector<RaySums> grid_rays;  ///< ray sums of each grid's pixels (ray fit)
+  std::vector<RaySums> rays;       ///< ray sums of each region
+  std::vector<int> edge_grids;     ///< grids with a neighbour outside their region
 };
 
 Workspace& ThreadWorkspace() {
@@ -70,6 +70,7 @@ std::vector<std::string> GridParams::Validate() const {
   if (EffectiveMu() < 3) problems.push_back("mu must be >= 3 (a plane needs 3 points)");
   if (!(alpha > 0 && alpha < 1)) problems.push_back("alpha must be in (0, 1)");
   if (!(beta > 0 && beta < 1)) problems.push_back("beta must be in (0, 1)");
+  if (refit_interval < 0) problems.push_back("refit_interval must be >= 0 (0 = adaptive)");
   return problems;
 }
 
@@ -108,22 +109,22 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   const auto t0 = Clock::now();
   ws.sums.resize(num_cells);
   ws.noise_weight.assign(num_cells, 0.0);
-  if (params_.ray_fit) ws.grid_rays.resize(num_cells);
+  ws.grid_rays.resize(params_.ray_fit ? num_cells : 0);
+  const PixelSumKernel kernel = FastestPixelSumKernel();
   const double s0 = params_.sigma0, s2 = params_.sigma_z2;
   for (int cy = 0; cy < cells_y; ++cy) {
     const int y0 = cy * k, y1 = std::min(height, y0 + k);
     MomentSums* crow = ws.sums.data() + static_cast<std::size_t>(cy) * cells_x;
     for (int cx = 0; cx < cells_x; ++cx) {
       const int x0 = cx * k, x1 = std::min(width, x0 + k);
-      // K, S, Q (10 sums); the noise moment W of the grid is set from its centre below.
+      // K, S, Q (10 sums) and the ray sums, while the grid's pixels are in L1 (the final ray fit
+      // of a region then adds its grids' sums instead of visiting every pixel again). The noise
+      // moment W of the grid is set from its centre below.
+      const std::size_t c = static_cast<std::size_t>(cy) * cells_x + cx;
       MomentSums m;
-      for (int y = y0; y < y1; ++y) {
-        const Eigen::Vector3f* row = pts + static_cast<std::size_t>(y) * width;
-        for (int x = x0; x < x1; ++x) {
-          const Eigen::Vector3f& p = row[x];
-          if (std::isfinite(p.z())) m.AddPosition(p.x(), p.y(), p.z());
-        }
-      }
+      RaySums* rays = params_.ray_fit ? &ws.grid_rays[c] : nullptr;
+      if (rays != nullptr) *rays = RaySums();
+      SumPixelBlock(pts, width, x0, y0, x1, y1, spherical, params_, m, rays, kernel);
       if (m.k > 0) {
         // Noise moment: W = w(z) Q with w = (sigma(z)/z)^2 at the grid's centre (within a k x k
         // grid z varies by ~1 %, so this equals the per-pixel sum to ~2 %; the pixels the
@@ -131,22 +132,9 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         const double z = spherical ? m.Centroid().norm() : m.sz / m.k;
         const double w = z > 0 ? (s0 + s2 * z * z) * (s0 + s2 * z * z) / (z * z) : 0.0;
         m.SetUniformNoise(w);
-        ws.noise_weight[static_cast<std::size_t>(cy) * cells_x + cx] = w;
+        ws.noise_weight[c] = w;
       }
       crow[cx] = m;
-      if (params_.ray_fit) {
-        // The grid's ray sums while its pixels are in L1: the final ray fit of a region then
-        // adds those of its grids instead of visiting every pixel again.
-        internal::RaySums rays;
-        for (int y = y0; y < y1; ++y) {
-          const Eigen::Vector3f* row = pts + static_cast<std::size_t>(y) * width;
-          for (int x = x0; x < x1; ++x) {
-            const float s = internal::PointDepth(row[x], spherical);
-            if (s > 0.0f) rays.Add(row[x], s, internal::RayWeight(params_, s));  // false for NaN
-          }
-        }
-        ws.grid_rays[static_cast<std::size_t>(cy) * cells_x + cx] = rays;
-      }
     }
   }
 
@@ -275,6 +263,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       }
     };
     if (depth_model) update_tilt(region.NormalTilt(fit.l2));
+    int since_refit = 0;  // joins since the plane was last refitted
     ws.members.clear();
     ws.members.push_back(seed);
     ws.cell_region[seed] = r;
@@ -338,17 +327,34 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       }
       MomentSums merged = region;
       merged.Merge(gs);
-      const FastFit merged_fit = RefitFrom(merged, fit.normal);
-      const double merged_tilt = merged.NormalTilt(merged_fit.l2);
-      // The noise along the normal alone is a lower bound of the effective noise (its tilt term
-      // only adds), so a merged MSE within its epsilon passes without the rest.
-      if (merged_fit.mse >= params_.Epsilon(merged.ExpectedMse(merged_fit.normal), merged.k)) {
-        const double expected = merged.EffectiveMse(merged_fit.normal, merged_tilt);
-        if (merged_fit.mse >= params_.Epsilon(expected, merged.k)) continue;
+      // The MSE test, with the cheap bound first: the noise along the normal alone is a lower
+      // bound of the effective noise (its tilt term only adds), and the MSE about the current
+      // normal an upper bound of the merged fit's, so either passing the test passes the exact one.
+      const bool adaptive = grid_.refit_interval != 1;
+      if (adaptive &&
+          merged.MseAbout(fit.normal) < params_.Epsilon(merged.ExpectedMse(fit.normal), merged.k)) {
+        region = merged;
+        since_refit += 1;
+        const int interval = grid_.refit_interval > 0
+                                 ? grid_.refit_interval
+                                 : std::max(1, static_cast<int>(ws.members.size()) / 64);
+        if (since_refit >= interval) {
+          fit = RefitFrom(region, fit.normal);
+          if (depth_model) update_tilt(region.NormalTilt(fit.l2));
+          since_refit = 0;
+        }
+      } else {
+        const FastFit merged_fit = RefitFrom(merged, fit.normal);
+        const double merged_tilt = merged.NormalTilt(merged_fit.l2);
+        if (merged_fit.mse >= params_.Epsilon(merged.ExpectedMse(merged_fit.normal), merged.k)) {
+          const double expected = merged.EffectiveMse(merged_fit.normal, merged_tilt);
+          if (merged_fit.mse >= params_.Epsilon(expected, merged.k)) continue;
+        }
+        region = merged;
+        fit = merged_fit;  // eq. (5): plane parameters updated on the join
+        if (depth_model) update_tilt(merged_tilt);
+        since_refit = 0;
       }
-      region = merged;
-      fit = merged_fit;  // eq. (5): plane parameters updated on every join
-      if (depth_model) update_tilt(merged_tilt);
       ws.cell_region[g] = r;
       ws.used[g] = 1;
       ws.members.push_back(g);
@@ -404,7 +410,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   }
   // Region ray sums from their grids' (the refinement below corrects them pixel by pixel).
   const std::size_t num_regions = ws.regions.size();
-  ws.rays.assign(params_.ray_fit ? num_regions : 0, internal::RaySums());
+  ws.rays.assign(params_.ray_fit ? num_regions : 0, RaySums());
   if (params_.ray_fit) {
     for (int c = 0; c < num_cells; ++c) {
       if (ws.cell_region[c] >= 0) ws.rays[ws.cell_region[c]].Add(ws.grid_rays[c]);
@@ -450,7 +456,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     const float s2f = static_cast<float>(s2), gammaf = static_cast<float>(params_.gamma);
     float cand[9][4];      // the candidate planes of a grid: n, d
     MomentSums gained[9];  // per candidate plane of the grid: what it gains
-    internal::RaySums gained_rays[9];
+    RaySums gained_rays[9];
     for (const int c : ws.edge_grids) {
       const int cx = c % cells_x, cy = c / cells_x;
       const int own = ws.cell_region[c];
@@ -529,10 +535,10 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       // plane and those joining another, gathered per grid and applied once. Their noise
       // moment takes the grid's weight, as the grid's own sums do.
       MomentSums lost;
-      internal::RaySums lost_rays;
+      RaySums lost_rays;
       for (int i = 0; i < n_adj; ++i) {
         gained[i] = MomentSums();
-        gained_rays[i] = internal::RaySums();
+        gained_rays[i] = RaySums();
       }
       for (int y = y0; y < y1; ++y) {
         for (int x = x0; x < x1; ++x) {
@@ -543,7 +549,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
           if (!std::isfinite(pf.z())) continue;
           const float z = internal::PointDepth(pf, spherical);
           const bool ray = params_.ray_fit && z > 0.0f;
-          const double w_ray = ray ? internal::RayWeight(params_, z) : 0.0;
+          const double w_ray = ray ? params_.RayFitWeight(z) : 0.0;
           if (own >= 0) {
             lost.AddPosition(pf.x(), pf.y(), pf.z());
             if (ray) lost_rays.Add(pf, z, w_ray);

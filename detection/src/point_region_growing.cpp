@@ -31,15 +31,6 @@ Workspace& ThreadWorkspace() {
   return ws;
 }
 
-/// MSE of the points of `m` about the plane with unit normal n through their centroid:
-/// (n^T Q n - (n.S)^2 / K) / K >= lambda_min / K.
-double MseAbout(const MomentSums& m, const Eigen::Vector3d& n) {
-  const double nqn = m.xx * n.x() * n.x() + m.yy * n.y() * n.y() + m.zz * n.z() * n.z() +
-                     2.0 * (m.xy * n.x() * n.y() + m.xz * n.x() * n.z() + m.yz * n.y() * n.z());
-  const double ns = m.sx * n.x() + m.sy * n.y() + m.sz * n.z();
-  return std::max(0.0, nqn - ns * ns / m.k) / m.k;
-}
-
 }  // namespace
 
 std::vector<std::string> PointParams::Validate() const {
@@ -193,7 +184,7 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
           // the normal alone, which the tilt term only raises): within that, no roots needed.
           const double dist = std::abs(fit.normal.dot(pc) - fit.d);
           if (dist >= params_.gamma && dist >= gamma_for(fit, region)) continue;
-          const double mse_about = MseAbout(merged, fit.normal);
+          const double mse_about = merged.MseAbout(fit.normal);
           if (mse_about < params_.Epsilon(merged.ExpectedMse(fit.normal), merged.k) ||
               mse_about <
                   params_.Epsilon(merged.EffectiveMse(fit.normal, merged.NormalTilt(fit.l2)),

@@ -104,7 +104,7 @@ std::vector<RayPlane> FitAlongRays(const datasets::OrganizedCloud& cloud,
   PLANESLAM_CHECK(sums.size() == regions.size(), "ray fit: one RaySums per region expected");
   const bool spherical = cloud.model == datasets::SensorModel::kSpherical;
   const int width = cloud.width, height = cloud.height;
-  auto weight = [&](double s) { return RayWeight(params, s); };
+  auto weight = [&](double s) { return params.RayFitWeight(s); };
   // The first crease pass visits the pixels on a border between two regions.
   std::vector<std::size_t> candidates = border_pixels;
   std::vector<char> queued(labels.size(), 0);
@@ -244,7 +244,7 @@ RegionBorders ScanLabelImage(const datasets::OrganizedCloud& cloud,
         }
         // A point behind the sensor (possible in a PCD) has no ray fit weight.
         const float s = PointDepth(cloud.points[i], spherical);
-        if (s > 0.0f) run.Add(cloud.points[i], s, RayWeight(params, s));
+        if (s > 0.0f) run.Add(cloud.points[i], s, params.RayFitWeight(s));
       }
       // Right and down neighbours: every 4-adjacent pair of pixels once.
       if (x + 1 < width && labels[i + 1] >= 0 && labels[i + 1] != r) borders.Add(i, r, i + 1);

@@ -16,61 +16,6 @@ inline float PointDepth(const Eigen::Vector3f& p, bool spherical) {
   return spherical ? p.norm() : p.z();
 }
 
-/// Normal equations of the ray fit of one region: 1/s_i = m.q_i with q_i = p_i / s_i the ray
-/// of pixel i scaled to unit depth (unit range for a scanner) and m = n / d; A = sum w q q^T
-/// (upper triangle), b = sum w q / s.
-struct RaySums {
-  double a00 = 0, a01 = 0, a02 = 0, a11 = 0, a12 = 0, a22 = 0;
-  double b0 = 0, b1 = 0, b2 = 0;
-
-  /// Adds pixel p at depth s with weight w (a negative w removes it). The ray is formed in
-  /// float (one division; 1e-7 relative, far below the depth noise) and summed in double.
-  void Add(const Eigen::Vector3f& p, float s, double w) {
-    const float inv_f = 1.0f / s;
-    const double inv = inv_f;
-    const double qx = p.x() * inv_f, qy = p.y() * inv_f, qz = p.z() * inv_f;
-    const double wx = w * qx, wy = w * qy, wz = w * qz;
-    a00 += wx * qx;
-    a01 += wx * qy;
-    a02 += wx * qz;
-    a11 += wy * qy;
-    a12 += wy * qz;
-    a22 += wz * qz;
-    b0 += wx * inv;
-    b1 += wy * inv;
-    b2 += wz * inv;
-  }
-  void Add(const RaySums& o) {
-    a00 += o.a00;
-    a01 += o.a01;
-    a02 += o.a02;
-    a11 += o.a11;
-    a12 += o.a12;
-    a22 += o.a22;
-    b0 += o.b0;
-    b1 += o.b1;
-    b2 += o.b2;
-  }
-  /// Removes sums added before (exact up to round-off).
-  void Subtract(const RaySums& o) {
-    a00 -= o.a00;
-    a01 -= o.a01;
-    a02 -= o.a02;
-    a11 -= o.a11;
-    a12 -= o.a12;
-    a22 -= o.a22;
-    b0 -= o.b0;
-    b1 -= o.b1;
-    b2 -= o.b2;
-  }
-};
-
-/// Weight of a pixel at depth (or range) s in the ray fit. A Kinect-type model (sigma0 = 0)
-/// weighs every pixel alike, which spares two divisions per pixel.
-inline double RayWeight(const DetectionParams& params, double s) {
-  return params.sigma0 == 0.0 ? 1.0 : params.InverseDepthWeight(s);
-}
-
 /// Where regions meet in a region-index image (-1 = none).
 struct RegionBorders {
   std::vector<std::size_t> pixels;   ///< pixels 4-adjacent to a pixel of another region, once each

@@ -5,6 +5,7 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <set>
+#include <string>
 
 #include "detection_checks.hpp"
 #include "synthetic_scene.hpp"
@@ -24,22 +25,26 @@ DetectionParams PaperConstants() {
 TEST(GridRegionGrowing, NoiseFreeRoomPaperThresholds) {
   const auto frame = test::RenderScene(test::RoomPlanes());
   for (int k : {3, 4, 5}) {
-    GridParams grid;
-    grid.cell_size = k;
-    DetectionParams params = PaperConstants();
-    // The paper's algorithm alone (no refinement, no merging) is checked with its own 3x3 grids;
-    // larger grids straddle the grazing right wall's corner and bias it by ~6 mm without the
-    // pixel-level refinement, which is why refinement is on by default.
-    for (bool refine : {false, true}) {
-      if (!refine && k != 3) continue;
-      params.refine_boundary = refine;
-      params.merge_regions = refine;
-      const GridRegionGrowing gbrg(params, grid);
-      const Segmentation seg = gbrg.Detect(frame.cloud);
-      test::ExpectPlanesFound(frame, seg, 2000, 0.5, 0.005,
-                              "grid" + std::to_string(k) + (refine ? "+refine" : ""));
-      EXPECT_EQ(seg.cells_x, (640 + k - 1) / k);
-      ASSERT_EQ(seg.cell_classes.size(), static_cast<std::size_t>(seg.cells_x * seg.cells_y));
+    for (int interval : {1, 0}) {  // refit on every join (paper) and the adaptive refit
+      GridParams grid;
+      grid.cell_size = k;
+      grid.refit_interval = interval;
+      DetectionParams params = PaperConstants();
+      // The paper's algorithm alone (no refinement, no merging) is checked with its own 3x3
+      // grids; larger grids straddle the grazing right wall's corner and bias it by ~6 mm
+      // without the pixel-level refinement, which is why refinement is on by default.
+      for (bool refine : {false, true}) {
+        if (!refine && k != 3) continue;
+        params.refine_boundary = refine;
+        params.merge_regions = refine;
+        const GridRegionGrowing gbrg(params, grid);
+        const Segmentation seg = gbrg.Detect(frame.cloud);
+        test::ExpectPlanesFound(frame, seg, 2000, 0.5, 0.005,
+                                "grid" + std::to_string(k) + (refine ? "+refine" : "") +
+                                    " interval " + std::to_string(interval));
+        EXPECT_EQ(seg.cells_x, (640 + k - 1) / k);
+        ASSERT_EQ(seg.cell_classes.size(), static_cast<std::size_t>(seg.cells_x * seg.cells_y));
+      }
     }
   }
 }
@@ -53,15 +58,20 @@ TEST(GridRegionGrowing, NoiseFreeRoomDepthThresholds) {
 TEST(GridRegionGrowing, KinectNoiseRoomDepthThresholds) {
   const auto frame = test::RenderScene(test::RoomPlanes(), 1.425e-3, 11);
   for (int k : {3, 4, 5}) {
-    GridParams grid;
-    grid.cell_size = k;
-    const GridRegionGrowing gbrg(DetectionParams(), grid);
-    const Segmentation seg = gbrg.Detect(frame.cloud);
-    test::ExpectPlanesFound(frame, seg, 2000, 2.0, 0.02, "noisy grid" + std::to_string(k));
-    // Most valid pixels belong to planes (the scene is all planes).
-    const auto assigned =
-        std::count_if(seg.labels.begin(), seg.labels.end(), [](int l) { return l >= 1; });
-    EXPECT_GT(assigned, 0.8 * frame.cloud.CountValid()) << "grid" << k;
+    for (int interval : {1, 0}) {
+      GridParams grid;
+      grid.cell_size = k;
+      grid.refit_interval = interval;
+      const GridRegionGrowing gbrg(DetectionParams(), grid);
+      const Segmentation seg = gbrg.Detect(frame.cloud);
+      const std::string what =
+          "noisy grid" + std::to_string(k) + " interval " + std::to_string(interval);
+      test::ExpectPlanesFound(frame, seg, 2000, 2.0, 0.02, what);
+      // Most valid pixels belong to planes (the scene is all planes).
+      const auto assigned =
+          std::count_if(seg.labels.begin(), seg.labels.end(), [](int l) { return l >= 1; });
+      EXPECT_GT(assigned, 0.8 * frame.cloud.CountValid()) << what;
+    }
   }
 }
 

@@ -4,8 +4,12 @@
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
+#include <cmath>
+#include <limits>
 #include <random>
+#include <vector>
 
+#include "planeslam/detection/detection_config.hpp"
 #include "planeslam/detection/fast_moments.hpp"
 #include "planeslam/detection/plane_covariance.hpp"
 
@@ -179,6 +183,67 @@ TEST(FastMoments, IncrementalFitEqualsBatchFit) {
     EXPECT_NEAR(r.l2, es.eigenvalues()(1), 1e-9 * es.eigenvalues()(2)) << i;
     EXPECT_NEAR(r.l3, es.eigenvalues()(2), 1e-9 * es.eigenvalues()(2)) << i;
     prev = r;
+  }
+}
+
+TEST(FastMoments, PixelBlockSumsEqualPointByPointSumsOnEveryKernel) {
+  // A 7 x 5 block inside an 11 x 6 organized cloud: points 0.5-5 m away, some without depth (NaN),
+  // some behind a scanner's origin (z < 0, range > 0).
+  const int width = 11, height = 6, x0 = 2, y0 = 1, x1 = 9, y1 = 6;
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<float> lateral(-2.0f, 2.0f), depth(0.5f, 5.0f);
+  std::vector<Eigen::Vector3f> cloud(width * height);
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    cloud[i] = Eigen::Vector3f(lateral(rng), lateral(rng), depth(rng));
+    if (i % 7 == 3) cloud[i].z() = std::numeric_limits<float>::quiet_NaN();
+    if (i % 11 == 5) cloud[i].z() = -cloud[i].z();
+  }
+  std::vector<PixelSumKernel> kernels = {PixelSumKernel::kScalar};
+  if (FastestPixelSumKernel() == PixelSumKernel::kAvx2) kernels.push_back(PixelSumKernel::kAvx2);
+  DetectionParams kinect, laser;
+  kinect.sigma0 = 0.0;  // uniform ray weight
+  laser.sigma0 = 0.01;  // ray weight varies with the range
+  for (const DetectionParams* params : {&kinect, &laser}) {
+    for (bool spherical : {false, true}) {
+      MomentSums expected;
+      RaySums expected_rays;
+      for (int y = y0; y < y1; ++y) {
+        for (int x = x0; x < x1; ++x) {
+          const Eigen::Vector3f& p = cloud[y * width + x];
+          if (!std::isfinite(p.z())) continue;
+          expected.AddPosition(p.x(), p.y(), p.z());
+          const float s = spherical ? p.norm() : p.z();
+          if (s > 0.0f) expected_rays.Add(p, s, params->RayFitWeight(s));
+        }
+      }
+      ASSERT_GT(expected.k, 20);
+      for (PixelSumKernel kernel : kernels) {
+        SCOPED_TRACE(::testing::Message() << "kernel " << static_cast<int>(kernel) << " spherical "
+                                          << spherical << " sigma0 " << params->sigma0);
+        MomentSums m;
+        RaySums rays;
+        SumPixelBlock(cloud.data(), width, x0, y0, x1, y1, spherical, *params, m, &rays, kernel);
+        const double got[] = {m.k, m.sx, m.sy, m.sz, m.xx, m.xy, m.xz, m.yy, m.yz, m.zz};
+        const double want[] = {expected.k,  expected.sx, expected.sy, expected.sz, expected.xx,
+                               expected.xy, expected.xz, expected.yy, expected.yz, expected.zz};
+        for (int i = 0; i < 10; ++i) EXPECT_NEAR(got[i], want[i], 1e-12 * (1 + std::abs(want[i])));
+        const double got_rays[] = {rays.a00, rays.a01, rays.a02, rays.a11, rays.a12,
+                                   rays.a22, rays.b0,  rays.b1,  rays.b2};
+        const double want_rays[] = {expected_rays.a00, expected_rays.a01, expected_rays.a02,
+                                    expected_rays.a11, expected_rays.a12, expected_rays.a22,
+                                    expected_rays.b0,  expected_rays.b1,  expected_rays.b2};
+        for (int i = 0; i < 9; ++i) {
+          EXPECT_NEAR(got_rays[i], want_rays[i], 1e-12 * (1 + std::abs(want_rays[i])));
+        }
+        EXPECT_EQ(m.wxx, 0.0);  // W is the caller's
+        // Without ray sums, the same moments.
+        MomentSums only;
+        SumPixelBlock(cloud.data(), width, x0, y0, x1, y1, spherical, *params, only, nullptr,
+                      kernel);
+        EXPECT_EQ(only.k, m.k);
+        EXPECT_NEAR(only.zz, m.zz, 1e-12 * m.zz);
+      }
+    }
   }
 }
 

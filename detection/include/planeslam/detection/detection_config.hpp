@@ -83,6 +83,9 @@ struct DetectionParams {
     const double s = Sigma(z);
     return s > 0.0 ? (z * z / s) * (z * z / s) : 1.0;
   }
+  /// Weight of a pixel at depth (or range) s in the ray fit. A Kinect-type model (sigma0 = 0)
+  /// weighs every pixel alike, which spares two divisions per pixel.
+  double RayFitWeight(double s) const { return sigma0 == 0.0 ? 1.0 : InverseDepthWeight(s); }
   /// Weight w = (sigma(z) / z)^2 of a point for the noise moment W (MomentSums::Add).
   double NoiseWeight(double z) const {
     const double r = Sigma(z) / z;

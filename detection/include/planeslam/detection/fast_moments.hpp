@@ -15,6 +15,8 @@
 
 namespace planeslam::detection {
 
+struct DetectionParams;
+
 /// Sufficient statistics of a point set plus its noise moment W (used by the depth-dependent
 /// thresholds and the covariance). Plain aggregate: Add/Merge are a few adds.
 ///
@@ -125,11 +127,86 @@ struct MomentSums {
   double NormalTilt(double l2) const {
     return 2.0 * std::sqrt(IsotropicMse() / std::max(l2, 1e-30));
   }
+  /// MSE of the points about the plane with unit normal n through their centroid,
+  /// (n^T Q n - (n.S)^2 / K) / K: at least the fitted MSE lambda_min / K, equal to it when n is
+  /// the fitted normal. The growers' cheap MSE test between refits.
+  double MseAbout(const Eigen::Vector3d& n) const {
+    const double nqn = xx * n.x() * n.x() + yy * n.y() * n.y() + zz * n.z() * n.z() +
+                       2.0 * (xy * n.x() * n.y() + xz * n.x() * n.z() + yz * n.y() * n.z());
+    const double ns = sx * n.x() + sy * n.y() + sz * n.z();
+    return std::max(0.0, nqn - ns * ns / k) / k;
+  }
   /// C = Q - S m^T (eq. 6) as the upper triangle {c00, c01, c02, c11, c12, c22}.
   void Scatter(double c[6]) const;
   /// The same statistics as a PlaneMoments (reference point = origin).
   PlaneMoments ToPlaneMoments() const;
 };
+
+/// Normal equations of the ray fit of one region: 1/s_i = m.q_i with q_i = p_i / s_i the ray
+/// of pixel i scaled to unit depth (unit range for a scanner) and m = n / d; A = sum w q q^T
+/// (upper triangle), b = sum w q / s.
+struct RaySums {
+  double a00 = 0, a01 = 0, a02 = 0, a11 = 0, a12 = 0, a22 = 0;
+  double b0 = 0, b1 = 0, b2 = 0;
+
+  /// Adds pixel p at depth s with weight w (a negative w removes it). The ray is formed in
+  /// float (one division; 1e-7 relative, far below the depth noise) and summed in double.
+  void Add(const Eigen::Vector3f& p, float s, double w) {
+    const float inv_f = 1.0f / s;
+    const double inv = inv_f;
+    const double qx = p.x() * inv_f, qy = p.y() * inv_f, qz = p.z() * inv_f;
+    const double wx = w * qx, wy = w * qy, wz = w * qz;
+    a00 += wx * qx;
+    a01 += wx * qy;
+    a02 += wx * qz;
+    a11 += wy * qy;
+    a12 += wy * qz;
+    a22 += wz * qz;
+    b0 += wx * inv;
+    b1 += wy * inv;
+    b2 += wz * inv;
+  }
+  void Add(const RaySums& o) {
+    a00 += o.a00;
+    a01 += o.a01;
+    a02 += o.a02;
+    a11 += o.a11;
+    a12 += o.a12;
+    a22 += o.a22;
+    b0 += o.b0;
+    b1 += o.b1;
+    b2 += o.b2;
+  }
+  /// Removes sums added before (exact up to round-off).
+  void Subtract(const RaySums& o) {
+    a00 -= o.a00;
+    a01 -= o.a01;
+    a02 -= o.a02;
+    a11 -= o.a11;
+    a12 -= o.a12;
+    a22 -= o.a22;
+    b0 -= o.b0;
+    b1 -= o.b1;
+    b2 -= o.b2;
+  }
+};
+
+/// The instruction set SumPixelBlock runs on.
+enum class PixelSumKernel {
+  kScalar,  ///< plain C++: any CPU
+  kAvx2,    ///< AVX2 + FMA: each pixel's outer products four doubles at a time
+};
+/// The fastest kernel this CPU runs, checked once at run time (the binary stays portable).
+PixelSumKernel FastestPixelSumKernel();
+
+/// Adds to `m` K, S and Q (not W) of the pixels of the block [x0, x1) x [y0, y1) of an organized
+/// cloud (row-major, `width` points a row) whose z is finite, and, when `rays` is not null, to
+/// `rays` those of them at depth s > 0 (z, or the range when `spherical`) with weight
+/// params.RayFitWeight(s). GBRG's per-grid pass. Both kernels add the pixels in the same order;
+/// their results differ by the rounding of fused multiply-adds only (~1e-16 relative).
+void SumPixelBlock(const Eigen::Vector3f* points, int width, int x0, int y0, int x1, int y1,
+                   bool spherical, const DetectionParams& params, MomentSums& m, RaySums* rays,
+                   PixelSumKernel kernel);
 
 /// Eigen decomposition of a symmetric 3x3 matrix as needed by plane fitting.
 struct SymEigen3 {

@@ -15,11 +15,18 @@
 ///    adds no evidence of continuity, and 8-neighbours leak across thin diagonal edges; every grid
 ///    of a 4-connected plane is still reached. A candidate g joins when
 ///      n_GR . n_g > cos(eta),  |n_GR . (m_GR - m_g)| < gamma,  MSE(GR u g) < epsilon
-///    (Algorithm 2 line 8), and the region's plane is refitted from the merged moments after every
-///    join (eq. 5-6). A rejected grid may be tested again when another of its neighbours joins
-///    (the region's plane has changed since). Regions of >= ceil(theta / k^2) grids are planes;
-///    the grids of smaller (uncertain) regions leave G as in the paper: they neither seed nor join
-///    later regions (their pixels may still be given to a plane by the refinement).
+///    (Algorithm 2 line 8). The merged moments are updated on every join (eq. 5); the plane is
+///    refitted from them (eq. 6) after every join with refit_interval = 1, as in the paper, or,
+///    with refit_interval = 0 (adaptive, the default), after every max(1, N/64) joins of a region
+///    of N grids: in between, the angle and coplanarity tests use the current plane (which moves
+///    by O(1/N) a grid), and the MSE test first tries the MSE about the current normal, an upper
+///    bound of the merged MSE; only when that bound fails is the exact eigen solve done, so the
+///    MSE test accepts what the paper's accepts (as PBRG's adaptive refit; under the depth model
+///    up to epsilon's own slight dependence on the normal). A rejected grid may be tested again
+///    when another of its neighbours joins (the region's plane has changed since). Regions of >=
+///    ceil(theta / k^2) grids are planes; the grids of smaller (uncertain) regions leave G as in
+///    the paper: they neither seed nor join later regions (their pixels may still be given to a
+///    plane by the refinement).
 /// 4. Beyond the paper (both optional, on by default): boundary refinement gives each valid pixel
 ///    of a grid outside every plane, with a plane among its 8 neighbour grids, to the best-fitting
 ///    such plane when |n.p - d| < gamma(z) (with refine_sigmas); then adjacent regions describing
@@ -35,8 +42,9 @@ namespace planeslam::detection {
 struct GridParams {
   int cell_size = 3;  ///< grid side k [px] (paper: 3)
   int mu = 0;         ///< min valid points of a non-sparse grid; 0 = k^2 - k + 1 (paper: 7 for 3x3)
-  double alpha = 0.006;  ///< linear when l2 <= alpha l3 (paper value)
-  double beta = 0.4;     ///< planar when l1 <= beta l2 (paper value)
+  double alpha = 0.006;    ///< linear when l2 <= alpha l3 (paper value)
+  double beta = 0.4;       ///< planar when l1 <= beta l2 (paper value)
+  int refit_interval = 0;  ///< 1 = refit the plane on every join (paper); N = every N; 0 = adaptive
 
   int EffectiveMu() const { return mu > 0 ? mu : cell_size * cell_size - cell_size + 1; }
   std::vector<std::string> Validate() const;
