@@ -35,6 +35,7 @@ constexpr std::size_t kPrefetchAhead = 6;
 struct Workspace {
   std::vector<MomentSums> sums;
   std::vector<double> noise_weight;  ///< each grid's w = (sigma(z) / z)^2 at its centre
+  std::vector<std::int32_t> counts;  ///< each grid's valid pixels (its K, compact for scans)
   std::vector<CellClass> classes;
   std::vector<int> dense;          ///< the non-sparse grids
   std::vector<double> scatter[6];  ///< their scatter, one array per entry
@@ -109,8 +110,9 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   const auto t0 = Clock::now();
   ws.sums.resize(num_cells);
   ws.noise_weight.assign(num_cells, 0.0);
+  ws.counts.resize(num_cells);
   ws.grid_rays.resize(params_.ray_fit ? num_cells : 0);
-  const PixelSumKernel kernel = FastestPixelSumKernel();
+  const SimdKernel kernel = FastestSimdKernel();
   const double s0 = params_.sigma0, s2 = params_.sigma_z2;
   for (int cy = 0; cy < cells_y; ++cy) {
     const int y0 = cy * k, y1 = std::min(height, y0 + k);
@@ -135,6 +137,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         ws.noise_weight[c] = w;
       }
       crow[cx] = m;
+      ws.counts[c] = static_cast<std::int32_t>(m.k);
     }
   }
 
@@ -196,10 +199,19 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     // The eigenvector only where it is read: the noise along the normal of a grid whose normal
     // is pure noise (tilt >= 1, most grids beyond 2-3 m) is its isotropic noise, and such a
     // grid gets no angle test either (see below).
-    const double tilt = s.NormalTilt(e.l2);
+    const double mse = e.l1 / s.k;
+    double tilt = s.NormalTilt(e.l2);
+    // A grid no flatter than its own noise (l1 beyond the paper's beta l2, and a residual within
+    // the full ray noise) has a normal that is noise too, whatever l2 says: a large grid far
+    // away, whose lateral extent is below the depth noise, and whose smallest eigenvector then
+    // lies in the image plane. Its normal is treated as unknown, as that of a grid tilted by a
+    // radian or more.
+    if (depth_model && tilt < 1.0 && e.l1 > grid_.beta * e.l2 &&
+        mse <= params_.planar_sigmas * params_.planar_sigmas * s.IsotropicMse()) {
+      tilt = 1.0;
+    }
     const bool have_normal = !depth_model || tilt < 1.0;
     if (have_normal) SmallestEigenvector(scatter, e);
-    const double mse = e.l1 / s.k;
     const double noise_mse =
         have_normal ? s.EffectiveMse(e.v1, tilt) : s.IsotropicMse();  // sigma_n,rms^2
     bool planar = e.l1 <= grid_.beta * e.l2;
@@ -217,7 +229,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     if (depth_model) {
       // Normal noise of a small grid: std ~ sigma_n / sqrt(l2) [rad].
       const double ang = eta + params_.eta_sigmas * std::sqrt(noise_mse / std::max(e.l2, 1e-18));
-      if (ang >= 0.5 * M_PI) {
+      if (ang >= 0.5 * M_PI || !have_normal) {
         ci.n.setZero();  // no angle test: the growth never reads it
         ci.cos_tol = -1.0;
         ci.sin_tol = 1.0;
@@ -396,14 +408,21 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   const auto t3 = Clock::now();
   ws.labels.assign(static_cast<std::size_t>(width) * height, -1);
   for (int y = 0; y < height; ++y) {
-    const std::int32_t* creg = ws.cell_region.data() + static_cast<std::size_t>(y / k) * cells_x;
+    const std::size_t cell_row = static_cast<std::size_t>(y / k) * cells_x;
+    const std::int32_t* creg = ws.cell_region.data() + cell_row;
+    const std::int32_t* ccount = ws.counts.data() + cell_row;
     std::int32_t* lrow = ws.labels.data() + static_cast<std::size_t>(y) * width;
     const Eigen::Vector3f* row = pts + static_cast<std::size_t>(y) * width;
+    const int full = k * std::min(k, height - y / k * k);  // pixels of a grid of this row
     for (int cx = 0; cx < cells_x; ++cx) {
       const std::int32_t r = creg[cx];
       if (r < 0) continue;
-      const int x1 = std::min(width, (cx + 1) * k);
-      for (int x = cx * k; x < x1; ++x) {
+      const int x0 = cx * k, x1 = std::min(width, x0 + k);
+      if (ccount[cx] == full && x1 - x0 == k) {  // every pixel valid: no need to look
+        std::fill(lrow + x0, lrow + x1, r);
+        continue;
+      }
+      for (int x = x0; x < x1; ++x) {
         if (std::isfinite(row[x].z())) lrow[x] = r;
       }
     }
@@ -421,23 +440,43 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // from a 4-neighbour's, so the refinement, the merge's adjacency and the crease pixels of the
   // ray fit look at them only.
   ws.edge_grids.clear();
+  auto region_at = [&](int cx, int cy) {
+    return cx >= 0 && cy >= 0 && cx < cells_x && cy < cells_y ? ws.cell_region[cy * cells_x + cx]
+                                                              : -1;
+  };
   for (int cy = 0; cy < cells_y; ++cy) {
+    const bool inner_row = cy > 0 && cy + 1 < cells_y;
+    const std::int32_t* mid = ws.cell_region.data() + static_cast<std::size_t>(cy) * cells_x;
+    const std::int32_t* up = inner_row ? mid - cells_x : mid;
+    const std::int32_t* down = inner_row ? mid + cells_x : mid;
     for (int cx = 0; cx < cells_x; ++cx) {
       const int c = cy * cells_x + cx;
-      if (ws.sums[c].k == 0) continue;
-      const int own = ws.cell_region[c];
-      bool interior = own >= 0, any_plane = own >= 0;
-      for (int oy = -1; oy <= 1; ++oy) {
-        for (int ox = -1; ox <= 1; ++ox) {
-          const int nx = cx + ox, ny = cy + oy;
-          const int r = nx >= 0 && ny >= 0 && nx < cells_x && ny < cells_y
-                            ? ws.cell_region[ny * cells_x + nx]
-                            : -1;
-          if (r != own) interior = false;
-          if (r >= 0) any_plane = true;
+      if (ws.counts[c] == 0) continue;
+      const std::int32_t own = mid[cx];
+      bool edge;
+      if (inner_row && cx > 0 && cx + 1 < cells_x) {
+        // Away from the image border, the 3 x 3 neighbourhood without bounds checks.
+        const std::int32_t around[8] = {up[cx - 1],  up[cx],       up[cx + 1], mid[cx - 1],
+                                        mid[cx + 1], down[cx - 1], down[cx],   down[cx + 1]};
+        bool same = true;
+        std::int32_t highest = own;
+        for (const std::int32_t r : around) {
+          same &= r == own;
+          highest = std::max(highest, r);
         }
+        edge = highest >= 0 && !(own >= 0 && same);
+      } else {
+        bool interior = own >= 0, any_plane = own >= 0;
+        for (int oy = -1; oy <= 1; ++oy) {
+          for (int ox = -1; ox <= 1; ++ox) {
+            const std::int32_t r = region_at(cx + ox, cy + oy);
+            if (r != own) interior = false;
+            if (r >= 0) any_plane = true;
+          }
+        }
+        edge = any_plane && !interior;
       }
-      if (any_plane && !interior) ws.edge_grids.push_back(c);
+      if (edge) ws.edge_grids.push_back(c);
     }
   }
   if (params_.refine_boundary && num_regions > 0) {

@@ -134,24 +134,29 @@ TEST(FastMoments, BatchEigenvaluesMatchEigenOrDeferToTheClosedForm) {
   }
   const double* c[6];
   for (int j = 0; j < 6; ++j) c[j] = columns[j].data();
-  std::vector<double> l1(kCount), l2(kCount), l3(kCount), ok(kCount);
-  SymEigenvaluesNewtonBatch(c, kCount, 1e-9, l1.data(), l2.data(), l3.data(), ok.data());
-  int usable = 0;
-  for (int i = 0; i < kCount; ++i) {
-    ASSERT_TRUE(ok[i] == 0.0 || ok[i] == 1.0) << i;
-    if (i % 4 == 0 && i % 50 != 2) {
-      EXPECT_EQ(ok[i], 1.0) << "plane-like matrix " << i;
+  std::vector<SimdKernel> kernels = {SimdKernel::kScalar};
+  if (FastestSimdKernel() == SimdKernel::kAvx2) kernels.push_back(SimdKernel::kAvx2);
+  for (SimdKernel kernel : kernels) {
+    SCOPED_TRACE(::testing::Message() << "kernel " << static_cast<int>(kernel));
+    std::vector<double> l1(kCount), l2(kCount), l3(kCount), ok(kCount);
+    SymEigenvaluesNewtonBatch(c, kCount, 1e-9, l1.data(), l2.data(), l3.data(), ok.data(), kernel);
+    int usable = 0;
+    for (int i = 0; i < kCount; ++i) {
+      ASSERT_TRUE(ok[i] == 0.0 || ok[i] == 1.0) << i;
+      if (i % 4 == 0 && i % 50 != 2) {
+        EXPECT_EQ(ok[i], 1.0) << "plane-like matrix " << i;
+      }
+      if (ok[i] == 0.0) continue;
+      ++usable;
+      ASSERT_TRUE(std::isfinite(l1[i]) && std::isfinite(l2[i]) && std::isfinite(l3[i])) << i;
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ref(matrices[i]);
+      const double scale = ref.eigenvalues()(2);
+      EXPECT_NEAR(l1[i], ref.eigenvalues()(0), 1e-9 * scale) << i;
+      EXPECT_NEAR(l2[i], ref.eigenvalues()(1), 1e-9 * scale) << i;
+      EXPECT_NEAR(l3[i], ref.eigenvalues()(2), 1e-9 * scale) << i;
     }
-    if (ok[i] == 0.0) continue;
-    ++usable;
-    ASSERT_TRUE(std::isfinite(l1[i]) && std::isfinite(l2[i]) && std::isfinite(l3[i])) << i;
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ref(matrices[i]);
-    const double scale = ref.eigenvalues()(2);
-    EXPECT_NEAR(l1[i], ref.eigenvalues()(0), 1e-9 * scale) << i;
-    EXPECT_NEAR(l2[i], ref.eigenvalues()(1), 1e-9 * scale) << i;
-    EXPECT_NEAR(l3[i], ref.eigenvalues()(2), 1e-9 * scale) << i;
+    EXPECT_GT(usable, kCount / 2);
   }
-  EXPECT_GT(usable, kCount / 2);
 }
 
 TEST(FastMoments, IncrementalFitEqualsBatchFit) {
@@ -198,8 +203,8 @@ TEST(FastMoments, PixelBlockSumsEqualPointByPointSumsOnEveryKernel) {
     if (i % 7 == 3) cloud[i].z() = std::numeric_limits<float>::quiet_NaN();
     if (i % 11 == 5) cloud[i].z() = -cloud[i].z();
   }
-  std::vector<PixelSumKernel> kernels = {PixelSumKernel::kScalar};
-  if (FastestPixelSumKernel() == PixelSumKernel::kAvx2) kernels.push_back(PixelSumKernel::kAvx2);
+  std::vector<SimdKernel> kernels = {SimdKernel::kScalar};
+  if (FastestSimdKernel() == SimdKernel::kAvx2) kernels.push_back(SimdKernel::kAvx2);
   DetectionParams kinect, laser;
   kinect.sigma0 = 0.0;  // uniform ray weight
   laser.sigma0 = 0.01;  // ray weight varies with the range
@@ -217,7 +222,7 @@ TEST(FastMoments, PixelBlockSumsEqualPointByPointSumsOnEveryKernel) {
         }
       }
       ASSERT_GT(expected.k, 20);
-      for (PixelSumKernel kernel : kernels) {
+      for (SimdKernel kernel : kernels) {
         SCOPED_TRACE(::testing::Message() << "kernel " << static_cast<int>(kernel) << " spherical "
                                           << spherical << " sigma0 " << params->sigma0);
         MomentSums m;

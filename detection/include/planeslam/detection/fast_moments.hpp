@@ -191,13 +191,13 @@ struct RaySums {
   }
 };
 
-/// The instruction set SumPixelBlock runs on.
-enum class PixelSumKernel {
-  kScalar,  ///< plain C++: any CPU
-  kAvx2,    ///< AVX2 + FMA: each pixel's outer products four doubles at a time
+/// The instruction set of a batch kernel (SumPixelBlock, SymEigenvaluesNewtonBatch).
+enum class SimdKernel {
+  kScalar,  ///< the compiler's baseline (SSE2 on x86-64): any CPU
+  kAvx2,    ///< AVX2 + FMA: four doubles at a time; only where FastestSimdKernel() says so
 };
 /// The fastest kernel this CPU runs, checked once at run time (the binary stays portable).
-PixelSumKernel FastestPixelSumKernel();
+SimdKernel FastestSimdKernel();
 
 /// Adds to `m` K, S and Q (not W) of the pixels of the block [x0, x1) x [y0, y1) of an organized
 /// cloud (row-major, `width` points a row) whose z is finite, and, when `rays` is not null, to
@@ -206,7 +206,7 @@ PixelSumKernel FastestPixelSumKernel();
 /// their results differ by the rounding of fused multiply-adds only (~1e-16 relative).
 void SumPixelBlock(const Eigen::Vector3f* points, int width, int x0, int y0, int x1, int y1,
                    bool spherical, const DetectionParams& params, MomentSums& m, RaySums* rays,
-                   PixelSumKernel kernel);
+                   SimdKernel kernel);
 
 /// Eigen decomposition of a symmetric 3x3 matrix as needed by plane fitting.
 struct SymEigen3 {
@@ -236,7 +236,8 @@ void SmallestEigenvector(const double c[6], SymEigen3& e);
 /// matrix at a time waits on each division in turn. ok[i] = 0 (else 1) where Newton does not
 /// apply or converge within its steps: use SymEigenvalues3 there.
 void SymEigenvaluesNewtonBatch(const double* const c[6], int n, double relative_tolerance,
-                               double* l1, double* l2, double* l3, double* ok);
+                               double* l1, double* l2, double* l3, double* ok,
+                               SimdKernel kernel = FastestSimdKernel());
 
 /// Plane fitted to moment sums (eq. 3-6): unit normal oriented so that d = n.m >= 0.
 struct FastFit {
