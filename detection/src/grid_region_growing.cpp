@@ -28,6 +28,9 @@ struct CellInfo {
   double sin_tol = 0.0;  ///< sine of the same tolerance (widening it by a tilt needs both)
 };
 
+/// Growth mark of a grid that can no longer join a region (see Workspace::mark).
+constexpr std::int32_t kTaken = -2;
+
 /// How many queue places ahead the growth prefetches grid data.
 constexpr std::size_t kPrefetchAhead = 6;
 
@@ -43,8 +46,9 @@ struct Workspace {
   std::vector<double> eigen_ok;    ///< 0: l1..l3 to come from the closed form
   std::vector<CellInfo> info;
   std::vector<std::int32_t> cell_region;
-  std::vector<std::uint8_t> used;
-  std::vector<std::int32_t> queued;
+  /// Growth state of each grid, one load per look: kTaken (not planar, or in R or R'), else the
+  /// last region that queued it (-1: none yet).
+  std::vector<std::int32_t> mark;
   std::vector<int> queue;
   std::vector<int> members;
   std::vector<std::uint64_t> seeds;
@@ -254,8 +258,10 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // ---- 3. Region growing (Algorithm 2): seeds in order of grid MSE, BFS over 4-neighbours.
   const auto t2 = Clock::now();
   ws.cell_region.assign(num_cells, -1);
-  ws.used.assign(num_cells, 0);
-  ws.queued.assign(num_cells, -1);
+  ws.mark.resize(num_cells);
+  for (int c = 0; c < num_cells; ++c) {
+    ws.mark[c] = ws.classes[c] == CellClass::kPlanar ? -1 : kTaken;
+  }
   ws.regions.clear();
   const std::size_t theta_grids = static_cast<std::size_t>((params_.theta + k * k - 1) / (k * k));
   const int dx[4] = {1, -1, 0, 0};
@@ -279,7 +285,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     ws.members.clear();
     ws.members.push_back(seed);
     ws.cell_region[seed] = r;
-    ws.used[seed] = 1;
+    ws.mark[seed] = kTaken;
     ws.queue.clear();
     std::size_t head = 0;
     auto push_neighbours = [&](int c) {
@@ -288,16 +294,17 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         const int nx = cx + dx[i], ny = cy + dy[i];
         if (nx < 0 || ny < 0 || nx >= cells_x || ny >= cells_y) continue;
         const int nb = ny * cells_x + nx;
-        if (ws.classes[nb] != CellClass::kPlanar) continue;
-        if (ws.used[nb] || ws.queued[nb] == r) continue;  // in R, R' or this region; queued
-        ws.queued[nb] = r;
+        // Not planar, in R, R' or this region; or queued already.
+        if (ws.mark[nb] == kTaken || ws.mark[nb] == r) continue;
+        ws.mark[nb] = r;
         ws.queue.push_back(nb);
       }
     };
     push_neighbours(seed);
     while (head < ws.queue.size()) {
       const int g = ws.queue[head++];
-      ws.queued[g] = -1;  // may be queued again by a later neighbour if rejected now
+      if (ws.mark[g] == kTaken) continue;
+      ws.mark[g] = -1;  // may be queued again by a later neighbour if rejected now
       // The wavefront of a large region spans more grids than the cache holds: fetch the data of
       // the grids a few places ahead in the queue while this one is tested.
       if (head + kPrefetchAhead < ws.queue.size()) {
@@ -307,7 +314,6 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         __builtin_prefetch(&ws.sums[ahead]);
         __builtin_prefetch(reinterpret_cast<const char*>(&ws.sums[ahead]) + 64);
       }
-      if (ws.used[g]) continue;
       const CellInfo& ci = ws.info[g];
       // Algorithm 2 line 8: angle, coplanarity, then the merged MSE (the only one needing a fit).
       const MomentSums& gs = ws.sums[g];
@@ -368,7 +374,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         since_refit = 0;
       }
       ws.cell_region[g] = r;
-      ws.used[g] = 1;
+      ws.mark[g] = kTaken;
       ws.members.push_back(g);
       push_neighbours(g);
     }
@@ -388,9 +394,10 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   std::vector<std::uint64_t>& seeds = ws.seeds;
   std::size_t next = 0;
   while (next < seeds.size()) {
-    seeds.erase(std::remove_if(seeds.begin() + static_cast<std::ptrdiff_t>(next), seeds.end(),
-                               [&](std::uint64_t key) { return ws.used[key & 0xffffffffu] != 0; }),
-                seeds.end());
+    seeds.erase(
+        std::remove_if(seeds.begin() + static_cast<std::ptrdiff_t>(next), seeds.end(),
+                       [&](std::uint64_t key) { return ws.mark[key & 0xffffffffu] == kTaken; }),
+        seeds.end());
     if (next >= seeds.size()) break;
     const std::size_t chunk = std::max<std::size_t>(256, (seeds.size() - next) / 8);
     const std::size_t end = std::min(seeds.size(), next + chunk);
@@ -400,7 +407,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     std::sort(first, last);
     for (; next < end; ++next) {
       const int seed = static_cast<int>(seeds[next] & 0xffffffffu);
-      if (!ws.used[seed]) grow_from(seed);  // else already in R or R'
+      if (ws.mark[seed] != kTaken) grow_from(seed);  // else already in R or R'
     }
   }
 
@@ -544,11 +551,11 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
             const float np = cand[i][0] * pf.x() + cand[i][1] * pf.y() + cand[i][2] * pf.z();
             const float tol = depth_model ? rsf * rel * std::abs(np) : gammaf;
             const float dist = std::abs(np - cand[i][3]);
-            if (dist * best_tol < best_dist * tol) {
-              best_dist = dist;
-              best_tol = tol;
-              best = i;
-            }
+            // Selects rather than branches: which candidate wins is data, not a pattern.
+            const bool better = dist * best_tol < best_dist * tol;
+            best_dist = better ? dist : best_dist;
+            best_tol = better ? tol : best_tol;
+            best = better ? i : best;
           }
           const int to = best >= 0 ? adj[best] : -1;
           ws.labels[idx] = to;

@@ -334,10 +334,11 @@ void MergeCoplanarRegions(std::vector<std::int32_t>& labels,
     merged_any = true;
   }
   if (!merged_any) return;
-  for (int i = 0; i < n; ++i) parent[i] = Find(parent, i);  // now every region's root
-  for (auto& l : labels) {
-    if (l >= 0) l = parent[l];
-  }
+  // Every label to its region's root, through a table shifted by one so that -1 (no region) maps
+  // to itself without a branch.
+  std::vector<std::int32_t> root(static_cast<std::size_t>(n) + 1, -1);
+  for (int i = 0; i < n; ++i) root[static_cast<std::size_t>(i) + 1] = Find(parent, i);
+  for (auto& l : labels) l = root[static_cast<std::size_t>(l + 1)];
 }
 
 void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
@@ -358,7 +359,7 @@ void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
   }
   std::stable_sort(order.begin(), order.end(),
                    [&](int a, int b) { return regions[a].k > regions[b].k; });
-  std::vector<std::int32_t> id_of(n, -1);
+  std::vector<std::int32_t> id_of(static_cast<std::size_t>(n) + 1, -1);  // region + 1 -> plane id
   out.planes.clear();
   out.planes.reserve(order.size());
   for (int r : order) {
@@ -381,13 +382,12 @@ void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
     // points, or the observed MSE when larger (unmodelled roughness), never below (0.1 mm)^2.
     const double sigma2 = std::max({s.ExpectedMse(p.normal), f.mse, 1e-8});
     p.covariance = PlaneCovariance(p.moments, p.normal, sigma2);
-    id_of[r] = p.id;
+    id_of[static_cast<std::size_t>(r) + 1] = p.id;
     out.planes.push_back(std::move(p));
   }
   out.labels.resize(region_labels.size());
   for (std::size_t i = 0; i < region_labels.size(); ++i) {
-    const std::int32_t r = region_labels[i];
-    out.labels[i] = r >= 0 ? id_of[r] : -1;
+    out.labels[i] = id_of[static_cast<std::size_t>(region_labels[i] + 1)];  // -1 stays -1
   }
 }
 
