@@ -3,6 +3,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #if defined(__x86_64__) || defined(__i386__)
 #include <immintrin.h>
@@ -391,6 +392,149 @@ __attribute__((target("avx2,fma"))) void SumPixelBlockAvx2(const Eigen::Vector3f
   rays->b1 += r[1][3];
   rays->b2 += r[2][3];
 }
+
+/// The four points p[0], p[stride], p[2 stride], p[3 stride] (floats, 3 a point) as x, y, z
+/// vectors of four lanes. Each load reads 16 bytes: the next point's x too (the caller makes sure
+/// that one exists).
+__attribute__((target("avx2,fma"))) inline void LoadFourPoints(const float* p, std::size_t stride,
+                                                               __m128& x, __m128& y, __m128& z) {
+  __m128 a = _mm_loadu_ps(p), b = _mm_loadu_ps(p + stride), c = _mm_loadu_ps(p + 2 * stride),
+         d = _mm_loadu_ps(p + 3 * stride);
+  _MM_TRANSPOSE4_PS(a, b, c, d);
+  x = a;
+  y = b;
+  z = c;
+}
+
+/// Lanes of a four-float mask widened to four doubles.
+__attribute__((target("avx2,fma"))) inline __m256d WidenMask(__m128 mask) {
+  return _mm256_castsi256_pd(_mm256_cvtepi32_epi64(_mm_castps_si128(mask)));
+}
+
+/// SumPixelBlockScalar of four neighbouring k x k grids at once, one grid a lane: the grids whose
+/// first columns are x0, x0 + k, x0 + 2k, x0 + 3k, rows [y0, y1). Each lane adds its pixels in the
+/// scalar kernel's order; invalid pixels add zeros (masked) instead of being skipped. The moments
+/// and the ray sums take a pass each (with 10 and 9 accumulators, each fits the 16 registers).
+__attribute__((target("avx2,fma"))) void SumFourGridsAvx2(const Eigen::Vector3f* points, int width,
+                                                          int x0, int y0, int y1, int k,
+                                                          bool spherical,
+                                                          const DetectionParams& params,
+                                                          MomentSums* sums, RaySums* rays) {
+  static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float), "points are packed float triples");
+  const float* base = reinterpret_cast<const float*>(points);
+  const std::size_t lane_stride = 3 * static_cast<std::size_t>(k);
+  const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+  const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
+  const __m128 one = _mm_set1_ps(1.0f);
+  // Lane 0's pixel (y, x0 + j); lane g's is k points further.
+  auto index = [&](int y, int j) { return static_cast<std::size_t>(y) * width + x0 + j; };
+  alignas(32) double lane[10][4];
+  {
+    __m256d n = _mm256_setzero_pd(), sx = n, sy = n, sz = n, xx = n, xy = n, xz = n, yy = n, yz = n,
+            zz = n;
+    for (int y = y0; y < y1; ++y) {
+      for (int j = 0; j < k; ++j) {
+        __m128 xf, yf, zf;
+        LoadFourPoints(base + 3 * index(y, j), lane_stride, xf, yf, zf);
+        const __m128 valid = _mm_cmplt_ps(_mm_and_ps(zf, abs_mask), inf);  // finite z
+        const __m256d x = _mm256_cvtps_pd(_mm_and_ps(xf, valid));
+        const __m256d yv = _mm256_cvtps_pd(_mm_and_ps(yf, valid));
+        const __m256d z = _mm256_cvtps_pd(_mm_and_ps(zf, valid));
+        n = _mm256_add_pd(n, _mm256_cvtps_pd(_mm_and_ps(one, valid)));
+        sx = _mm256_add_pd(sx, x);
+        sy = _mm256_add_pd(sy, yv);
+        sz = _mm256_add_pd(sz, z);
+        xx = _mm256_fmadd_pd(x, x, xx);
+        xy = _mm256_fmadd_pd(x, yv, xy);
+        xz = _mm256_fmadd_pd(x, z, xz);
+        yy = _mm256_fmadd_pd(yv, yv, yy);
+        yz = _mm256_fmadd_pd(yv, z, yz);
+        zz = _mm256_fmadd_pd(z, z, zz);
+      }
+    }
+    const __m256d all[10] = {n, sx, sy, sz, xx, xy, xz, yy, yz, zz};
+    for (int i = 0; i < 10; ++i) _mm256_store_pd(lane[i], all[i]);
+  }
+  for (int g = 0; g < 4; ++g) {
+    MomentSums& m = sums[g];
+    m = MomentSums();
+    m.k = lane[0][g];
+    m.sx = lane[1][g];
+    m.sy = lane[2][g];
+    m.sz = lane[3][g];
+    m.xx = lane[4][g];
+    m.xy = lane[5][g];
+    m.xz = lane[6][g];
+    m.yy = lane[7][g];
+    m.yz = lane[8][g];
+    m.zz = lane[9][g];
+  }
+  if (rays == nullptr) return;
+  const bool uniform_weight = params.sigma0 == 0.0;  // RayFitWeight is 1
+  const __m256d s0 = _mm256_set1_pd(params.sigma0), s2 = _mm256_set1_pd(params.sigma_z2);
+  __m256d a00 = _mm256_setzero_pd(), a01 = a00, a02 = a00, a11 = a00, a12 = a00, a22 = a00,
+          b0 = a00, b1 = a00, b2 = a00;
+  for (int y = y0; y < y1; ++y) {
+    for (int j = 0; j < k; ++j) {
+      __m128 xf, yf, zf;
+      LoadFourPoints(base + 3 * index(y, j), lane_stride, xf, yf, zf);
+      const __m128 valid = _mm_cmplt_ps(_mm_and_ps(zf, abs_mask), inf);
+      // The depth s (the range as internal::PointDepth forms it, lane by lane) and the ray p / s
+      // in float, as RaySums::Add; pixels at s <= 0 (or NaN) add nothing.
+      __m128 s = zf;
+      if (spherical) {
+        alignas(16) float range[4];
+        for (int g = 0; g < 4; ++g) {
+          range[g] =
+              internal::PointDepth(points[index(y, j) + static_cast<std::size_t>(g) * k], true);
+        }
+        s = _mm_load_ps(range);
+      }
+      const __m128 use = _mm_and_ps(valid, _mm_cmpgt_ps(s, _mm_setzero_ps()));
+      const __m128 inv_f = _mm_and_ps(_mm_div_ps(one, s), use);
+      const __m256d qx = _mm256_cvtps_pd(_mm_mul_ps(_mm_and_ps(xf, use), inv_f));
+      const __m256d qy = _mm256_cvtps_pd(_mm_mul_ps(_mm_and_ps(yf, use), inv_f));
+      const __m256d qz = _mm256_cvtps_pd(_mm_mul_ps(_mm_and_ps(zf, use), inv_f));
+      const __m256d inv = _mm256_cvtps_pd(inv_f);
+      __m256d wx = qx, wy = qy, wz = qz;
+      if (!uniform_weight) {
+        // DetectionParams::InverseDepthWeight: (s^2 / sigma)^2, 1 where sigma <= 0.
+        const __m256d sd = _mm256_cvtps_pd(_mm_and_ps(s, use));
+        const __m256d sigma = _mm256_fmadd_pd(_mm256_mul_pd(s2, sd), sd, s0);
+        const __m256d t = _mm256_div_pd(_mm256_mul_pd(sd, sd), sigma);
+        __m256d w = _mm256_blendv_pd(_mm256_set1_pd(1.0), _mm256_mul_pd(t, t),
+                                     _mm256_cmp_pd(sigma, _mm256_setzero_pd(), _CMP_GT_OQ));
+        w = _mm256_and_pd(w, WidenMask(use));
+        wx = _mm256_mul_pd(w, qx);
+        wy = _mm256_mul_pd(w, qy);
+        wz = _mm256_mul_pd(w, qz);
+      }
+      a00 = _mm256_fmadd_pd(wx, qx, a00);
+      a01 = _mm256_fmadd_pd(wx, qy, a01);
+      a02 = _mm256_fmadd_pd(wx, qz, a02);
+      a11 = _mm256_fmadd_pd(wy, qy, a11);
+      a12 = _mm256_fmadd_pd(wy, qz, a12);
+      a22 = _mm256_fmadd_pd(wz, qz, a22);
+      b0 = _mm256_fmadd_pd(wx, inv, b0);
+      b1 = _mm256_fmadd_pd(wy, inv, b1);
+      b2 = _mm256_fmadd_pd(wz, inv, b2);
+    }
+  }
+  const __m256d all[9] = {a00, a01, a02, a11, a12, a22, b0, b1, b2};
+  for (int i = 0; i < 9; ++i) _mm256_store_pd(lane[i], all[i]);
+  for (int g = 0; g < 4; ++g) {
+    RaySums& r = rays[g];
+    r.a00 = lane[0][g];
+    r.a01 = lane[1][g];
+    r.a02 = lane[2][g];
+    r.a11 = lane[3][g];
+    r.a12 = lane[4][g];
+    r.a22 = lane[5][g];
+    r.b0 = lane[6][g];
+    r.b1 = lane[7][g];
+    r.b2 = lane[8][g];
+  }
+}
 #endif
 
 }  // namespace
@@ -415,4 +559,33 @@ void SumPixelBlock(const Eigen::Vector3f* points, int width, int x0, int y0, int
 #endif
   SumPixelBlockScalar(points, width, x0, y0, x1, y1, spherical, params, m, rays);
 }
+
+void SumGridRow(const Eigen::Vector3f* points, int width, int height, int y0, int y1, int k,
+                bool spherical, const DetectionParams& params, MomentSums* sums, RaySums* rays,
+                SimdKernel kernel) {
+  const int cells = (width + k - 1) / k;
+  int cx = 0;
+#ifdef PLANESLAM_X86
+  if (kernel == SimdKernel::kAvx2) {
+    // Groups of four whole grids whose loads (16 bytes a point) stay inside the cloud.
+    const std::size_t num_points = static_cast<std::size_t>(width) * height;
+    for (; cx + 4 <= cells; cx += 4) {
+      const int x0 = cx * k;
+      if (x0 + 4 * k > width) break;
+      const std::size_t last = static_cast<std::size_t>(y1 - 1) * width + x0 + 4 * k - 1;
+      if (last + 1 >= num_points) break;
+      SumFourGridsAvx2(points, width, x0, y0, y1, k, spherical, params, sums + cx,
+                       rays != nullptr ? rays + cx : nullptr);
+    }
+  }
+#endif
+  for (; cx < cells; ++cx) {
+    const int x0 = cx * k, x1 = std::min(width, x0 + k);
+    sums[cx] = MomentSums();
+    RaySums* r = rays != nullptr ? rays + cx : nullptr;
+    if (r != nullptr) *r = RaySums();
+    SumPixelBlock(points, width, x0, y0, x1, y1, spherical, params, sums[cx], r, kernel);
+  }
+}
+
 }  // namespace planeslam::detection

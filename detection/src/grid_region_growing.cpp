@@ -108,9 +108,9 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   const Eigen::Vector3f* pts = cloud.points.data();
   Workspace& ws = ThreadWorkspace();
 
-  // ---- 1. Per-grid moments, one grid at a time: its k rows are k short runs inside a band of k
-  // image rows that stays in L1, and each grid's sums are written once (no read-modify-write
-  // per row, no separate clearing pass).
+  // ---- 1. Per-grid moments: K, S, Q (10 sums) and the ray sums of a row of grids at a time,
+  // while its band of k image rows is in L1 (the final ray fit of a region then adds its grids'
+  // sums instead of visiting every pixel again); then each grid's noise moment W.
   const auto t0 = Clock::now();
   ws.sums.resize(num_cells);
   ws.noise_weight.assign(num_cells, 0.0);
@@ -120,28 +120,20 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   const double s0 = params_.sigma0, s2 = params_.sigma_z2;
   for (int cy = 0; cy < cells_y; ++cy) {
     const int y0 = cy * k, y1 = std::min(height, y0 + k);
-    MomentSums* crow = ws.sums.data() + static_cast<std::size_t>(cy) * cells_x;
-    for (int cx = 0; cx < cells_x; ++cx) {
-      const int x0 = cx * k, x1 = std::min(width, x0 + k);
-      // K, S, Q (10 sums) and the ray sums, while the grid's pixels are in L1 (the final ray fit
-      // of a region then adds its grids' sums instead of visiting every pixel again). The noise
-      // moment W of the grid is set from its centre below.
-      const std::size_t c = static_cast<std::size_t>(cy) * cells_x + cx;
-      MomentSums m;
-      RaySums* rays = params_.ray_fit ? &ws.grid_rays[c] : nullptr;
-      if (rays != nullptr) *rays = RaySums();
-      SumPixelBlock(pts, width, x0, y0, x1, y1, spherical, params_, m, rays, kernel);
-      if (m.k > 0) {
-        // Noise moment: W = w(z) Q with w = (sigma(z)/z)^2 at the grid's centre (within a k x k
-        // grid z varies by ~1 %, so this equals the per-pixel sum to ~2 %; the pixels the
-        // refinement moves carry their grid's weight too).
-        const double z = spherical ? m.Centroid().norm() : m.sz / m.k;
-        const double w = z > 0 ? (s0 + s2 * z * z) * (s0 + s2 * z * z) / (z * z) : 0.0;
-        m.SetUniformNoise(w);
-        ws.noise_weight[c] = w;
-      }
-      crow[cx] = m;
+    const std::size_t row = static_cast<std::size_t>(cy) * cells_x;
+    SumGridRow(pts, width, height, y0, y1, k, spherical, params_, ws.sums.data() + row,
+               params_.ray_fit ? ws.grid_rays.data() + row : nullptr, kernel);
+    for (std::size_t c = row; c < row + cells_x; ++c) {
+      MomentSums& m = ws.sums[c];
       ws.counts[c] = static_cast<std::int32_t>(m.k);
+      if (m.k == 0) continue;
+      // Noise moment: W = w(z) Q with w = (sigma(z)/z)^2 at the grid's centre (within a k x k
+      // grid z varies by ~1 %, so this equals the per-pixel sum to ~2 %; the pixels the
+      // refinement moves carry their grid's weight too).
+      const double z = spherical ? m.Centroid().norm() : m.sz / m.k;
+      const double w = z > 0 ? (s0 + s2 * z * z) * (s0 + s2 * z * z) / (z * z) : 0.0;
+      m.SetUniformNoise(w);
+      ws.noise_weight[c] = w;
     }
   }
 

@@ -4,6 +4,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -247,6 +248,66 @@ TEST(FastMoments, PixelBlockSumsEqualPointByPointSumsOnEveryKernel) {
                       kernel);
         EXPECT_EQ(only.k, m.k);
         EXPECT_NEAR(only.zz, m.zz, 1e-12 * m.zz);
+      }
+    }
+  }
+}
+
+TEST(FastMoments, GridRowSumsEqualBlockSumsOnEveryKernel) {
+  // Every row of grids of a 37 x 11 cloud (no grid size divides 37), the last row of grids
+  // included (where a wide load could read past the cloud), with invalid pixels and points
+  // behind a scanner, for both ray weightings and both sensor models.
+  const int width = 37, height = 11;
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<float> lateral(-2.0f, 2.0f), depth(0.5f, 5.0f);
+  std::vector<Eigen::Vector3f> cloud(width * height);
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    cloud[i] = Eigen::Vector3f(lateral(rng), lateral(rng), depth(rng));
+    if (i % 5 == 1) cloud[i].z() = std::numeric_limits<float>::quiet_NaN();
+    if (i % 13 == 4) cloud[i].z() = std::numeric_limits<float>::infinity();
+    if (i % 11 == 5) cloud[i].z() = -cloud[i].z();
+  }
+  std::vector<SimdKernel> kernels = {SimdKernel::kScalar};
+  if (FastestSimdKernel() == SimdKernel::kAvx2) kernels.push_back(SimdKernel::kAvx2);
+  DetectionParams kinect, laser;
+  kinect.sigma0 = 0.0;
+  laser.sigma0 = 0.01;
+  for (const DetectionParams* params : {&kinect, &laser}) {
+    for (bool spherical : {false, true}) {
+      for (int k : {2, 3, 5, 7}) {
+        const int cells = (width + k - 1) / k;
+        for (int y0 = 0; y0 < height; y0 += k) {
+          const int y1 = std::min(height, y0 + k);
+          for (SimdKernel kernel : kernels) {
+            SCOPED_TRACE(::testing::Message()
+                         << "kernel " << static_cast<int>(kernel) << " k " << k << " y0 " << y0
+                         << " spherical " << spherical << " sigma0 " << params->sigma0);
+            std::vector<MomentSums> sums(cells);
+            std::vector<RaySums> rays(cells);
+            SumGridRow(cloud.data(), width, height, y0, y1, k, spherical, *params, sums.data(),
+                       rays.data(), kernel);
+            for (int cx = 0; cx < cells; ++cx) {
+              MomentSums want;
+              RaySums want_rays;
+              SumPixelBlock(cloud.data(), width, cx * k, y0, std::min(width, cx * k + k), y1,
+                            spherical, *params, want, &want_rays, SimdKernel::kScalar);
+              const MomentSums& m = sums[cx];
+              const RaySums& r = rays[cx];
+              const double got[] = {m.k,   m.sx,  m.sy, m.sz,  m.xx,  m.xy,  m.xz,
+                                    m.yy,  m.yz,  m.zz, r.a00, r.a01, r.a02, r.a11,
+                                    r.a12, r.a22, r.b0, r.b1,  r.b2};
+              const double expected[] = {want.k,        want.sx,       want.sy,       want.sz,
+                                         want.xx,       want.xy,       want.xz,       want.yy,
+                                         want.yz,       want.zz,       want_rays.a00, want_rays.a01,
+                                         want_rays.a02, want_rays.a11, want_rays.a12, want_rays.a22,
+                                         want_rays.b0,  want_rays.b1,  want_rays.b2};
+              for (int i = 0; i < 19; ++i) {
+                EXPECT_NEAR(got[i], expected[i], 1e-12 * (1 + std::abs(expected[i])))
+                    << "grid " << cx << " sum " << i;
+              }
+            }
+          }
+        }
       }
     }
   }

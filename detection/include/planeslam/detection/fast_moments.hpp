@@ -208,6 +208,15 @@ void SumPixelBlock(const Eigen::Vector3f* points, int width, int x0, int y0, int
                    bool spherical, const DetectionParams& params, MomentSums& m, RaySums* rays,
                    SimdKernel kernel);
 
+/// SumPixelBlock of every k x k grid of one row of grids: grid cx covers columns
+/// [cx k, min(width, cx k + k)) of rows [y0, y1) of an organized cloud of width x height points,
+/// and its sums are written to sums[cx] (and rays[cx] when `rays` is not null), for cx in
+/// [0, ceil(width / k)). W is left 0. The AVX2 kernel sums four neighbouring grids at once, one a
+/// lane, in the same pixel order as SumPixelBlock.
+void SumGridRow(const Eigen::Vector3f* points, int width, int height, int y0, int y1, int k,
+                bool spherical, const DetectionParams& params, MomentSums* sums, RaySums* rays,
+                SimdKernel kernel);
+
 /// Eigen decomposition of a symmetric 3x3 matrix as needed by plane fitting.
 struct SymEigen3 {
   double l1 = 0, l2 = 0, l3 = 0;                  ///< eigenvalues, ascending
