@@ -157,7 +157,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // the divisions of many grids in flight).
   ws.dense.clear();
   for (int c = 0; c < num_cells; ++c) {
-    if (ws.sums[c].k >= mu) ws.dense.push_back(c);  // else sparse
+    if (ws.counts[c] >= mu) ws.dense.push_back(c);  // else sparse
   }
   const int num_dense = static_cast<int>(ws.dense.size());
   for (auto& column : ws.scatter) column.resize(num_dense);
@@ -195,7 +195,6 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     // The eigenvector only where it is read: the noise along the normal of a grid whose normal
     // is pure noise (tilt >= 1, most grids beyond 2-3 m) is its isotropic noise, and such a
     // grid gets no angle test either (see below).
-    const double mse = e.l1 / s.k;
     double tilt = s.NormalTilt(e.l2);
     // A grid no flatter than its own noise (l1 beyond the paper's beta l2, and a residual within
     // the full ray noise) has a normal that is noise too, whatever l2 says: a large grid far
@@ -203,11 +202,12 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     // lies in the image plane. Its normal is treated as unknown, as that of a grid tilted by a
     // radian or more.
     if (depth_model && tilt < 1.0 && e.l1 > grid_.beta * e.l2 &&
-        mse <= params_.planar_sigmas * params_.planar_sigmas * s.IsotropicMse()) {
+        e.l1 / s.k <= params_.planar_sigmas * params_.planar_sigmas * s.IsotropicMse()) {
       tilt = 1.0;
     }
     const bool have_normal = !depth_model || tilt < 1.0;
-    if (have_normal) SmallestEigenvector(scatter, e);
+    if (have_normal) SmallestEigenvector(scatter, e);  // also refines l1
+    const double mse = e.l1 / s.k;
     const double noise_mse =
         have_normal ? s.EffectiveMse(e.v1, tilt) : s.IsotropicMse();  // sigma_n,rms^2
     bool planar = e.l1 <= grid_.beta * e.l2;
@@ -391,7 +391,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
                        [&](std::uint64_t key) { return ws.mark[key & 0xffffffffu] == kTaken; }),
         seeds.end());
     if (next >= seeds.size()) break;
-    const std::size_t chunk = std::max<std::size_t>(256, (seeds.size() - next) / 8);
+    const std::size_t chunk = std::max<std::size_t>(256, (seeds.size() - next) / 32);
     const std::size_t end = std::min(seeds.size(), next + chunk);
     const auto first = seeds.begin() + static_cast<std::ptrdiff_t>(next);
     const auto last = seeds.begin() + static_cast<std::ptrdiff_t>(end);
