@@ -187,47 +187,111 @@ void SymEigenvaluesNewtonBatch(const double* const c[6], int n, double relative_
   NewtonBatchDefault(c, n, relative_tolerance, l1, l2, l3, ok);
 }
 
-void SmallestEigenvector(const double c[6], SymEigen3& e) {
-  const Eigen::Vector3d r0(c[0] - e.l1, c[1], c[2]);
-  const Eigen::Vector3d r1(c[1], c[3] - e.l1, c[4]);
-  const Eigen::Vector3d r2(c[2], c[4], c[5] - e.l1);
+namespace {
+
+/// SmallestEigenvector for one matrix, without branches (selects only), so that the batch loop
+/// below vectorises; the scalar function runs the same code.
+__attribute__((always_inline)) inline void SmallestEigenvectorLane(double c0, double c1, double c2,
+                                                                   double c3, double c4, double c5,
+                                                                   double l1, double l2, double l3,
+                                                                   double& vx, double& vy,
+                                                                   double& vz, double& l1_refined) {
   // The rows of C - l1 I span the plane orthogonal to v1 (rank 2 when l1 < l2): the largest of the
   // three cross products is the best-conditioned estimate of v1.
-  const Eigen::Vector3d c01 = r0.cross(r1), c02 = r0.cross(r2), c12 = r1.cross(r2);
-  const double n01 = c01.squaredNorm(), n02 = c02.squaredNorm(), n12 = c12.squaredNorm();
-  const double scale = std::max(std::abs(e.l3), std::abs(e.l1));
-  double best = n01;
-  Eigen::Vector3d v = c01;
-  if (n02 > best) {
-    best = n02;
-    v = c02;
-  }
-  if (n12 > best) {
-    best = n12;
-    v = c12;
-  }
-  if (best > 1e-28 * scale * scale * scale * scale && best > 0.0) {
-    e.v1 = v / std::sqrt(best);
-  } else {
-    // l1 ~ l2 (collinear or isotropic points): any unit vector orthogonal to the largest row.
-    Eigen::Vector3d row = r0;
-    if (r1.squaredNorm() > row.squaredNorm()) row = r1;
-    if (r2.squaredNorm() > row.squaredNorm()) row = r2;
-    if (row.squaredNorm() <= 0.0) {
-      e.v1 = Eigen::Vector3d::UnitZ();
-    } else {
-      Eigen::Vector3d any =
-          std::abs(row.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
-      e.v1 = row.cross(any).normalized();
-    }
-  }
+  const double r0x = c0 - l1, r0y = c1, r0z = c2;
+  const double r1x = c1, r1y = c3 - l1, r1z = c4;
+  const double r2x = c2, r2y = c4, r2z = c5 - l1;
+  const double a0 = r0y * r1z - r0z * r1y, a1 = r0z * r1x - r0x * r1z, a2 = r0x * r1y - r0y * r1x;
+  const double b0 = r0y * r2z - r0z * r2y, b1 = r0z * r2x - r0x * r2z, b2 = r0x * r2y - r0y * r2x;
+  const double d0 = r1y * r2z - r1z * r2y, d1 = r1z * r2x - r1x * r2z, d2 = r1x * r2y - r1y * r2x;
+  const double na = a0 * a0 + a1 * a1 + a2 * a2, nb = b0 * b0 + b1 * b1 + b2 * b2,
+               nd = d0 * d0 + d1 * d1 + d2 * d2;
+  const bool take_b = nb > na;
+  double best = take_b ? nb : na;
+  double x = take_b ? b0 : a0, y = take_b ? b1 : a1, z = take_b ? b2 : a2;
+  const bool take_d = nd > best;
+  best = take_d ? nd : best;
+  x = take_d ? d0 : x;
+  y = take_d ? d1 : y;
+  z = take_d ? d2 : z;
+  const double scale = std::max(std::abs(l3), std::abs(l1));
+  const bool separated = best > 1e-28 * scale * scale * scale * scale && best > 0.0;
+  const double inv = 1.0 / std::sqrt(separated ? best : 1.0);
+  // l1 ~ l2 (collinear or isotropic points): any unit vector orthogonal to the largest row (the
+  // zero vector when that is orthogonal to the axis picked, as Eigen's normalized() gives).
+  const double n0 = r0x * r0x + r0y * r0y + r0z * r0z, n1 = r1x * r1x + r1y * r1y + r1z * r1z,
+               n2 = r2x * r2x + r2y * r2y + r2z * r2z;
+  const bool row1 = n1 > n0;
+  double rn = row1 ? n1 : n0;
+  double rx = row1 ? r1x : r0x, ry = row1 ? r1y : r0y, rz = row1 ? r1z : r0z;
+  const bool row2 = n2 > rn;
+  rn = row2 ? n2 : rn;
+  rx = row2 ? r2x : rx;
+  ry = row2 ? r2y : ry;
+  rz = row2 ? r2z : rz;
+  const double ax = std::abs(rx) < 0.9 ? 1.0 : 0.0, ay = 1.0 - ax;   // UnitX or UnitY
+  const double ox = -rz * ay, oy = rz * ax, oz = rx * ay - ry * ax;  // row x any
+  const double on = ox * ox + oy * oy + oz * oz;
+  const double oinv = on > 0.0 ? 1.0 / std::sqrt(on > 0.0 ? on : 1.0) : 1.0;
+  const bool no_row = !(rn > 0.0);
+  vx = separated ? x * inv : (no_row ? 0.0 : ox * oinv);
+  vy = separated ? y * inv : (no_row ? 0.0 : oy * oinv);
+  vz = separated ? z * inv : (no_row ? 1.0 : oz * oinv);
   // Rayleigh quotient: accurate smallest eigenvalue even when l1 << l3 (the trig form loses it to
   // cancellation at ~1e-16 l3).
-  const Eigen::Vector3d& v1 = e.v1;
-  const double rq =
-      c[0] * v1.x() * v1.x() + c[3] * v1.y() * v1.y() + c[5] * v1.z() * v1.z() +
-      2.0 * (c[1] * v1.x() * v1.y() + c[2] * v1.x() * v1.z() + c[4] * v1.y() * v1.z());
-  e.l1 = std::max(0.0, std::min(rq, e.l2));
+  const double rq = c0 * vx * vx + c3 * vy * vy + c5 * vz * vz +
+                    2.0 * (c1 * vx * vy + c2 * vx * vz + c4 * vy * vz);
+  l1_refined = std::max(0.0, std::min(rq, l2));
+}
+
+__attribute__((always_inline)) inline void SmallestEigenvectorLoop(
+    const double* __restrict c0, const double* __restrict c1, const double* __restrict c2,
+    const double* __restrict c3, const double* __restrict c4, const double* __restrict c5,
+    const double* __restrict l1, const double* __restrict l2, const double* __restrict l3, int n,
+    double* __restrict vx, double* __restrict vy, double* __restrict vz,
+    double* __restrict l1_refined) {
+  for (int i = 0; i < n; ++i) {
+    SmallestEigenvectorLane(c0[i], c1[i], c2[i], c3[i], c4[i], c5[i], l1[i], l2[i], l3[i], vx[i],
+                            vy[i], vz[i], l1_refined[i]);
+  }
+}
+
+void SmallestEigenvectorDefault(const double* const c[6], const double* l1, const double* l2,
+                                const double* l3, int n, double* const v[3], double* l1_refined) {
+  SmallestEigenvectorLoop(c[0], c[1], c[2], c[3], c[4], c[5], l1, l2, l3, n, v[0], v[1], v[2],
+                          l1_refined);
+}
+
+#ifdef PLANESLAM_X86
+__attribute__((target("avx2,fma"))) void SmallestEigenvectorAvx2(const double* const c[6],
+                                                                 const double* l1, const double* l2,
+                                                                 const double* l3, int n,
+                                                                 double* const v[3],
+                                                                 double* l1_refined) {
+  SmallestEigenvectorLoop(c[0], c[1], c[2], c[3], c[4], c[5], l1, l2, l3, n, v[0], v[1], v[2],
+                          l1_refined);
+}
+#endif
+
+}  // namespace
+
+void SmallestEigenvector(const double c[6], SymEigen3& e) {
+  double x, y, z, l1;
+  SmallestEigenvectorLane(c[0], c[1], c[2], c[3], c[4], c[5], e.l1, e.l2, e.l3, x, y, z, l1);
+  e.v1 = Eigen::Vector3d(x, y, z);
+  e.l1 = l1;
+}
+
+void SmallestEigenvectorBatch(const double* const c[6], const double* l1, const double* l2,
+                              const double* l3, int n, double* const v[3], double* l1_refined,
+                              SimdKernel kernel) {
+#ifdef PLANESLAM_X86
+  if (kernel == SimdKernel::kAvx2) {
+    SmallestEigenvectorAvx2(c, l1, l2, l3, n, v, l1_refined);
+    return;
+  }
+#endif
+  SmallestEigenvectorDefault(c, l1, l2, l3, n, v, l1_refined);
 }
 
 void SymEigenvaluesAscending(const double c[6], double& l1, double& l2, double& l3) {

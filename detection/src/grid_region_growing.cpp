@@ -43,6 +43,8 @@ struct Workspace {
   std::vector<int> dense;          ///< the non-sparse grids
   std::vector<double> scatter[6];  ///< their scatter, one array per entry
   std::vector<double> l1, l2, l3;  ///< their eigenvalues, ascending
+  std::vector<double> v1[3];       ///< their smallest eigenvectors
+  std::vector<double> l1_refined;  ///< l1 as the Rayleigh quotient of v1
   std::vector<double> eigen_ok;    ///< 0: l1..l3 to come from the closed form
   std::vector<CellInfo> info;
   std::vector<std::int32_t> cell_region;
@@ -174,25 +176,31 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   const double* columns[6];
   for (int i = 0; i < 6; ++i) columns[i] = ws.scatter[i].data();
   SymEigenvaluesNewtonBatch(columns, num_dense, 1e-9, ws.l1.data(), ws.l2.data(), ws.l3.data(),
-                            ws.eigen_ok.data());
+                            ws.eigen_ok.data(), kernel);
+  for (int j = 0; j < num_dense; ++j) {
+    if (ws.eigen_ok[j]) continue;
+    double scatter[6];
+    for (int i = 0; i < 6; ++i) scatter[i] = ws.scatter[i][j];
+    SymEigenvalues3(scatter, ws.l1[j], ws.l2[j], ws.l3[j]);
+  }
+  // Every grid's smallest eigenvector, also in one batch (read only where the normal counts).
+  for (auto& column : ws.v1) column.resize(num_dense);
+  ws.l1_refined.resize(num_dense);
+  double* const v1[3] = {ws.v1[0].data(), ws.v1[1].data(), ws.v1[2].data()};
+  SmallestEigenvectorBatch(columns, ws.l1.data(), ws.l2.data(), ws.l3.data(), num_dense, v1,
+                           ws.l1_refined.data(), kernel);
   for (int j = 0; j < num_dense; ++j) {
     const int c = ws.dense[j];
     const MomentSums& s = ws.sums[c];
-    double scatter[6];
-    for (int i = 0; i < 6; ++i) scatter[i] = ws.scatter[i][j];
     SymEigen3 e;
-    if (ws.eigen_ok[j]) {
-      e.l1 = ws.l1[j];
-      e.l2 = ws.l2[j];
-      e.l3 = ws.l3[j];
-    } else {
-      SymEigenvalues3(scatter, e.l1, e.l2, e.l3);
-    }
+    e.l1 = ws.l1[j];
+    e.l2 = ws.l2[j];
+    e.l3 = ws.l3[j];
     if (e.l2 <= grid_.alpha * e.l3) {
       ws.classes[c] = CellClass::kLinear;
       continue;
     }
-    // The eigenvector only where it is read: the noise along the normal of a grid whose normal
+    // The eigenvector only where it counts: the noise along the normal of a grid whose normal
     // is pure noise (tilt >= 1, most grids beyond 2-3 m) is its isotropic noise, and such a
     // grid gets no angle test either (see below).
     double tilt = s.NormalTilt(e.l2);
@@ -206,7 +214,10 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       tilt = 1.0;
     }
     const bool have_normal = !depth_model || tilt < 1.0;
-    if (have_normal) SmallestEigenvector(scatter, e);  // also refines l1
+    if (have_normal) {  // the eigenvector, and l1 refined as its Rayleigh quotient
+      e.v1 = Eigen::Vector3d(ws.v1[0][j], ws.v1[1][j], ws.v1[2][j]);
+      e.l1 = ws.l1_refined[j];
+    }
     const double mse = e.l1 / s.k;
     const double noise_mse =
         have_normal ? s.EffectiveMse(e.v1, tilt) : s.IsotropicMse();  // sigma_n,rms^2
@@ -230,7 +241,6 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         ci.cos_tol = -1.0;
         ci.sin_tol = 1.0;
       } else {
-        if (!have_normal) SmallestEigenvector(scatter, e);
         ci.n = e.v1.dot(ci.m) < 0 ? Eigen::Vector3d(-e.v1) : e.v1;
         ci.cos_tol = std::cos(ang);
         ci.sin_tol = std::sin(ang);

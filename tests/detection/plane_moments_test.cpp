@@ -160,6 +160,52 @@ TEST(FastMoments, BatchEigenvaluesMatchEigenOrDeferToTheClosedForm) {
   }
 }
 
+TEST(FastMoments, BatchEigenvectorsEqualTheScalarOnes) {
+  // Plane-like, general, a double smallest eigenvalue, collinear, isotropic and empty scatters:
+  // every lane of every kernel gives SmallestEigenvector's unit vector and refined l1.
+  std::mt19937 rng(31);
+  std::uniform_real_distribution<double> uni(-1, 1);
+  constexpr int kCount = 600;
+  std::vector<double> columns[6], l1(kCount), l2(kCount), l3(kCount);
+  std::vector<SymEigen3> expected(kCount);
+  for (int i = 0; i < kCount; ++i) {
+    const Eigen::Matrix3d a = Eigen::Matrix3d::NullaryExpr([&] { return uni(rng); });
+    Eigen::Matrix3d c = a * a.transpose();
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(c);
+    Eigen::Vector3d ev = es.eigenvalues();
+    if (i % 6 == 0) ev(0) = ev(2) * 1e-9;   // plane-like
+    if (i % 6 == 1) ev(1) = ev(0);          // a double smallest eigenvalue
+    if (i % 6 == 2) ev(0) = ev(1) = 0.0;    // collinear points
+    if (i % 6 == 3) ev.setConstant(ev(2));  // isotropic
+    if (i % 60 == 4) ev.setZero();          // no points
+    c = es.eigenvectors() * ev.asDiagonal() * es.eigenvectors().transpose();
+    const double u[6] = {c(0, 0), c(0, 1), c(0, 2), c(1, 1), c(1, 2), c(2, 2)};
+    for (int j = 0; j < 6; ++j) columns[j].push_back(u[j]);
+    SymEigenvaluesAscending(u, l1[i], l2[i], l3[i]);
+    expected[i].l1 = l1[i];
+    expected[i].l2 = l2[i];
+    expected[i].l3 = l3[i];
+    SmallestEigenvector(u, expected[i]);
+  }
+  const double* c[6];
+  for (int j = 0; j < 6; ++j) c[j] = columns[j].data();
+  std::vector<SimdKernel> kernels = {SimdKernel::kScalar};
+  if (FastestSimdKernel() == SimdKernel::kAvx2) kernels.push_back(SimdKernel::kAvx2);
+  for (SimdKernel kernel : kernels) {
+    SCOPED_TRACE(::testing::Message() << "kernel " << static_cast<int>(kernel));
+    std::vector<double> vx(kCount), vy(kCount), vz(kCount), refined(kCount);
+    double* const v[3] = {vx.data(), vy.data(), vz.data()};
+    SmallestEigenvectorBatch(c, l1.data(), l2.data(), l3.data(), kCount, v, refined.data(), kernel);
+    for (int i = 0; i < kCount; ++i) {
+      EXPECT_DOUBLE_EQ(vx[i], expected[i].v1.x()) << i;
+      EXPECT_DOUBLE_EQ(vy[i], expected[i].v1.y()) << i;
+      EXPECT_DOUBLE_EQ(vz[i], expected[i].v1.z()) << i;
+      EXPECT_DOUBLE_EQ(refined[i], expected[i].l1) << i;
+      if (i % 60 != 4) EXPECT_NEAR(Eigen::Vector3d(vx[i], vy[i], vz[i]).norm(), 1.0, 1e-12) << i;
+    }
+  }
+}
+
 TEST(FastMoments, IncrementalFitEqualsBatchFit) {
   const auto pts = NoisyPlanePoints(400, 6, 0.005, Eigen::Vector3d(0.1, 0.9, 0.3), 1.2);
   MomentSums inc;

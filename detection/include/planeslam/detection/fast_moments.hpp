@@ -238,6 +238,12 @@ void SymEigenvaluesAscending(const double c[6], double& l1, double& l2, double& 
 /// ...and, given them in e, the eigenvector of the smallest (cross product of two rows of
 /// C - l1 I) with l1 refined as its Rayleigh quotient.
 void SmallestEigenvector(const double c[6], SymEigen3& e);
+/// SmallestEigenvector for many matrices at once (structure of arrays as below, eigenvalues
+/// l1 <= l2 <= l3 given): v[0..2][i] the unit eigenvector, l1_refined[i] its Rayleigh quotient.
+/// The same arithmetic as SmallestEigenvector, lane by lane.
+void SmallestEigenvectorBatch(const double* const c[6], const double* l1, const double* l2,
+                              const double* l3, int n, double* const v[3], double* l1_refined,
+                              SimdKernel kernel = FastestSimdKernel());
 /// The Newton half of SymEigenvaluesAscending for many matrices at once (GBRG's classification),
 /// stopping at a step below relative_tolerance times the trace. Matrix i is {c[0][i], ...,
 /// c[5][i]} (upper triangle, structure of arrays). A fixed number of steps and no branches let
