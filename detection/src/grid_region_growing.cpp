@@ -502,9 +502,9 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     for (std::size_t i = 0; i < num_regions; ++i) ws.fits[i] = FitSums(ws.regions[i]);
     const float rsf = static_cast<float>(params_.refine_sigmas);
     const float s2f = static_cast<float>(s2), gammaf = static_cast<float>(params_.gamma);
-    float cand[9][4];      // the candidate planes of a grid: n, d
-    MomentSums gained[9];  // per candidate plane of the grid: what it gains
-    RaySums gained_rays[9];
+    float cand[9][4];       // the candidate planes of a grid: n, d
+    MomentSums gained[10];  // per candidate plane of the grid (and none): what it gains
+    RaySums gained_rays[10];
     for (const int c : ws.edge_grids) {
       const int cx = c % cells_x, cy = c / cells_x;
       const int own = ws.cell_region[c];
@@ -579,12 +579,11 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         }
         continue;
       }
-      // Else only the pixels that change plane change the sums: those leaving the grid's own
-      // plane and those joining another, gathered per grid and applied once. Their noise
-      // moment takes the grid's weight, as the grid's own sums do.
-      MomentSums lost;
-      RaySums lost_rays;
-      for (int i = 0; i < n_adj; ++i) {
+      // Else only the pixels that change plane change the sums: each moved pixel is added to
+      // the slot of where it goes (slot n_adj: to no plane); what the grid's own plane loses is
+      // all the slots together. Applied once per grid; the noise moment takes the grid's
+      // weight, as the grid's own sums do.
+      for (int i = 0; i <= n_adj; ++i) {
         gained[i] = MomentSums();
         gained_rays[i] = RaySums();
       }
@@ -595,32 +594,28 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
           if (to == own) continue;  // also every invalid pixel of a grid outside the planes
           const Eigen::Vector3f& pf = pts[idx];
           if (!std::isfinite(pf.z())) continue;
+          int slot = 0;
+          while (slot < n_adj && adj[slot] != to) ++slot;
+          gained[slot].AddPosition(pf.x(), pf.y(), pf.z());
           const float z = internal::PointDepth(pf, spherical);
-          const bool ray = params_.ray_fit && z > 0.0f;
-          const double w_ray = ray ? params_.RayFitWeight(z) : 0.0;
-          if (own >= 0) {
-            lost.AddPosition(pf.x(), pf.y(), pf.z());
-            if (ray) lost_rays.Add(pf, z, w_ray);
-          }
-          if (to >= 0) {
-            int slot = 0;
-            while (adj[slot] != to) ++slot;
-            gained[slot].AddPosition(pf.x(), pf.y(), pf.z());
-            if (ray) gained_rays[slot].Add(pf, z, w_ray);
-          }
+          if (params_.ray_fit && z > 0.0f) gained_rays[slot].Add(pf, z, params_.RayFitWeight(z));
         }
       }
       const double w = ws.noise_weight[c];
-      if (own >= 0) {
-        lost.SetUniformNoise(w);
-        ws.regions[own].Subtract(lost);
-        if (params_.ray_fit) ws.rays[own].Subtract(lost_rays);
-      }
-      for (int i = 0; i < n_adj; ++i) {
+      MomentSums lost;
+      RaySums lost_rays;
+      for (int i = 0; i <= n_adj; ++i) {
         if (gained[i].k == 0) continue;
         gained[i].SetUniformNoise(w);
+        lost.Merge(gained[i]);
+        lost_rays.Add(gained_rays[i]);
+        if (i == n_adj) continue;  // the pixels that leave every plane
         ws.regions[adj[i]].Merge(gained[i]);
         if (params_.ray_fit) ws.rays[adj[i]].Add(gained_rays[i]);
+      }
+      if (own >= 0) {
+        ws.regions[own].Subtract(lost);
+        if (params_.ray_fit) ws.rays[own].Subtract(lost_rays);
       }
     }
   }
