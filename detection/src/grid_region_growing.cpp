@@ -241,8 +241,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         ci.sin_tol = 1.0;
       } else {
         ci.n = e.v1.dot(ci.m) < 0 ? Eigen::Vector3d(-e.v1) : e.v1;
-        ci.cos_tol = std::cos(ang);
-        ci.sin_tol = std::sin(ang);
+        SinCosFirstQuadrant(ang, ci.sin_tol, ci.cos_tol);  // eta <= ang < pi / 2
       }
       // Seed order under the noise model: the paper's minimal MSE, plus the ray noise leaking in
       // through the grid's normal uncertainty, so that grids whose normal is mostly noise (far
@@ -277,8 +276,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     auto update_tilt = [&](double raw_tilt) {
       tilt = std::min(1.0, raw_tilt);
       if (tilt > 0.02) {  // below, the tests ignore the tilt (see there)
-        cos_tilt = std::cos(tilt);
-        sin_tilt = std::sin(tilt);
+        SinCosFirstQuadrant(tilt, sin_tilt, cos_tilt);  // 0.02 < tilt <= 1
       }
     };
     if (depth_model) update_tilt(region.NormalTilt(fit.l2));

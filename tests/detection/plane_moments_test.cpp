@@ -359,6 +359,17 @@ TEST(FastMoments, GridRowSumsEqualBlockSumsOnEveryKernel) {
   }
 }
 
+TEST(FastMoments, FirstQuadrantSinCosMatchesTheLibrary) {
+  double worst = 0.0;
+  for (int i = 0; i <= 100000; ++i) {
+    const double x = 0.5 * M_PI * i / 100000;
+    double s, c;
+    SinCosFirstQuadrant(x, s, c);
+    worst = std::max({worst, std::abs(s - std::sin(x)), std::abs(c - std::cos(x))});
+  }
+  EXPECT_LT(worst, 1e-13);
+}
+
 TEST(PlaneCovariance, RankThreePsdNullAlongNormalAndScalesWithNoise) {
   const Eigen::Vector3d n = Eigen::Vector3d(0.2, 0.1, 1).normalized();
   const auto pts = NoisyPlanePoints(2000, 7, 0.0, n, 3.0);
