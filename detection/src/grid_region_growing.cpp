@@ -31,6 +31,9 @@ struct alignas(64) CellInfo {
 /// Growth mark of a grid that can no longer join a region (see Workspace::mark).
 constexpr std::int32_t kTaken = -2;
 
+/// Grids classified per batch (the batch arrays of a chunk take about 130 kB).
+constexpr int kClassifyChunk = 1024;
+
 /// How many queue places ahead the growth prefetches grid data.
 constexpr std::size_t kPrefetchAhead = 6;
 
@@ -40,7 +43,7 @@ struct Workspace {
   std::vector<double> noise_weight;  ///< each grid's w = (sigma(z) / z)^2 at its centre
   std::vector<std::int32_t> counts;  ///< each grid's valid pixels (its K, compact for scans)
   std::vector<CellClass> classes;
-  std::vector<int> dense;          ///< the non-sparse grids
+  std::vector<int> dense;          ///< the non-sparse grids of a classification chunk
   std::vector<double> scatter[6];  ///< their scatter, one array per entry
   std::vector<double> l1, l2, l3;  ///< their eigenvalues, ascending
   std::vector<double> v1[3];       ///< their smallest eigenvectors
@@ -155,103 +158,104 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     std::memcpy(&bits, &f, 4);
     return static_cast<std::uint64_t>(bits) << 32 | static_cast<std::uint32_t>(c);
   };
-  // The scatter of every non-sparse grid, then their eigenvalues all at once (the batch keeps
-  // the divisions of many grids in flight).
-  ws.dense.clear();
-  for (int c = 0; c < num_cells; ++c) {
-    if (ws.counts[c] >= mu) ws.dense.push_back(c);  // else sparse
-  }
-  const int num_dense = static_cast<int>(ws.dense.size());
-  for (auto& column : ws.scatter) column.resize(num_dense);
-  for (auto* l : {&ws.l1, &ws.l2, &ws.l3}) l->resize(num_dense);
-  ws.eigen_ok.resize(num_dense);
-  for (int j = 0; j < num_dense; ++j) {
-    double scatter[6];
-    ws.sums[ws.dense[j]].Scatter(scatter);
-    for (int i = 0; i < 6; ++i) ws.scatter[i][j] = scatter[i];
-  }
-  // A grid's eigenvalues feed thresholds and a float seed key: Newton's last step below 1e-9 of
-  // the trace is plenty (a grid whose normal is read refines l1 as its Rayleigh quotient
-  // anyway). Lanes where it is not reached in six steps (l1 close to l2) use the closed form.
-  const double* columns[6];
-  for (int i = 0; i < 6; ++i) columns[i] = ws.scatter[i].data();
-  SymEigenvaluesNewtonBatch(columns, num_dense, 1e-9, ws.l1.data(), ws.l2.data(), ws.l3.data(),
-                            ws.eigen_ok.data(), kernel);
-  for (int j = 0; j < num_dense; ++j) {
-    if (ws.eigen_ok[j]) continue;
-    double scatter[6];
-    for (int i = 0; i < 6; ++i) scatter[i] = ws.scatter[i][j];
-    SymEigenvalues3(scatter, ws.l1[j], ws.l2[j], ws.l3[j]);
-  }
-  // Every grid's smallest eigenvector, also in one batch (read only where the normal counts).
-  for (auto& column : ws.v1) column.resize(num_dense);
-  ws.l1_refined.resize(num_dense);
-  double* const v1[3] = {ws.v1[0].data(), ws.v1[1].data(), ws.v1[2].data()};
-  SmallestEigenvectorBatch(columns, ws.l1.data(), ws.l2.data(), ws.l3.data(), num_dense, v1,
-                           ws.l1_refined.data(), kernel);
-  for (int j = 0; j < num_dense; ++j) {
-    const int c = ws.dense[j];
-    const MomentSums& s = ws.sums[c];
-    SymEigen3 e;
-    e.l1 = ws.l1[j];
-    e.l2 = ws.l2[j];
-    e.l3 = ws.l3[j];
-    if (e.l2 <= grid_.alpha * e.l3) {
-      ws.classes[c] = CellClass::kLinear;
-      continue;
+  // The non-sparse grids in chunks of kClassifyChunk, whose batch arrays stay in cache: per
+  // chunk the grids' scatter, then their eigenvalues all at once (the batch keeps the divisions of
+  // many grids in flight), their eigenvectors, and the rules.
+  for (auto& column : ws.scatter) column.resize(kClassifyChunk);
+  for (auto* l : {&ws.l1, &ws.l2, &ws.l3, &ws.eigen_ok, &ws.l1_refined}) l->resize(kClassifyChunk);
+  for (auto& column : ws.v1) column.resize(kClassifyChunk);
+  for (int next = 0; next < num_cells;) {
+    ws.dense.clear();
+    for (; next < num_cells && static_cast<int>(ws.dense.size()) < kClassifyChunk; ++next) {
+      if (ws.counts[next] >= mu) ws.dense.push_back(next);  // else sparse
     }
-    // The eigenvector only where it counts: the noise along the normal of a grid whose normal
-    // is pure noise (tilt >= 1, most grids beyond 2-3 m) is its isotropic noise, and such a
-    // grid gets no angle test either (see below).
-    double tilt = s.NormalTilt(e.l2);
-    // A grid no flatter than its own noise (l1 beyond the paper's beta l2, and a residual within
-    // the full ray noise) has a normal that is noise too, whatever l2 says: a large grid far
-    // away, whose lateral extent is below the depth noise, and whose smallest eigenvector then
-    // lies in the image plane. Its normal is treated as unknown, as that of a grid tilted by a
-    // radian or more.
-    if (depth_model && tilt < 1.0 && e.l1 > grid_.beta * e.l2 &&
-        e.l1 / s.k <= params_.planar_sigmas * params_.planar_sigmas * s.IsotropicMse()) {
-      tilt = 1.0;
+    const int num_dense = static_cast<int>(ws.dense.size());
+    for (int j = 0; j < num_dense; ++j) {
+      double scatter[6];
+      ws.sums[ws.dense[j]].Scatter(scatter);
+      for (int i = 0; i < 6; ++i) ws.scatter[i][j] = scatter[i];
     }
-    const bool have_normal = !depth_model || tilt < 1.0;
-    if (have_normal) {  // the eigenvector, and l1 refined as its Rayleigh quotient
-      e.v1 = Eigen::Vector3d(ws.v1[0][j], ws.v1[1][j], ws.v1[2][j]);
-      e.l1 = ws.l1_refined[j];
+    // A grid's eigenvalues feed thresholds and a float seed key: Newton's last step below 1e-9 of
+    // the trace is plenty (a grid whose normal is read refines l1 as its Rayleigh quotient
+    // anyway). Lanes where it is not reached in six steps (l1 close to l2) use the closed form.
+    const double* columns[6];
+    for (int i = 0; i < 6; ++i) columns[i] = ws.scatter[i].data();
+    SymEigenvaluesNewtonBatch(columns, num_dense, 1e-9, ws.l1.data(), ws.l2.data(), ws.l3.data(),
+                              ws.eigen_ok.data(), kernel);
+    for (int j = 0; j < num_dense; ++j) {
+      if (ws.eigen_ok[j]) continue;
+      double scatter[6];
+      for (int i = 0; i < 6; ++i) scatter[i] = ws.scatter[i][j];
+      SymEigenvalues3(scatter, ws.l1[j], ws.l2[j], ws.l3[j]);
     }
-    const double mse = e.l1 / s.k;
-    const double noise_mse =
-        have_normal ? s.EffectiveMse(e.v1, tilt) : s.IsotropicMse();  // sigma_n,rms^2
-    bool planar = e.l1 <= grid_.beta * e.l2;
-    if (!planar && depth_model) {
-      planar = mse <= params_.planar_sigmas * params_.planar_sigmas * noise_mse;
-    }
-    if (!planar) {
-      ws.classes[c] = CellClass::kSpherical;
-      continue;
-    }
-    ws.classes[c] = CellClass::kPlanar;
-    CellInfo& ci = ws.info[c];
-    ci.m = s.Centroid();
-    if (depth_model) {
-      // Normal noise of a small grid: std ~ sigma_n / sqrt(l2) [rad].
-      const double ang = eta + params_.eta_sigmas * std::sqrt(noise_mse / std::max(e.l2, 1e-18));
-      if (ang >= 0.5 * M_PI || !have_normal) {
-        ci.n.setZero();  // no angle test: the growth never reads it
-        ci.cos_tol = -1.0;
-        ci.sin_tol = 1.0;
+    // Every grid's smallest eigenvector, also in one batch (read only where the normal counts).
+    double* const v1[3] = {ws.v1[0].data(), ws.v1[1].data(), ws.v1[2].data()};
+    SmallestEigenvectorBatch(columns, ws.l1.data(), ws.l2.data(), ws.l3.data(), num_dense, v1,
+                             ws.l1_refined.data(), kernel);
+    for (int j = 0; j < num_dense; ++j) {
+      const int c = ws.dense[j];
+      const MomentSums& s = ws.sums[c];
+      SymEigen3 e;
+      e.l1 = ws.l1[j];
+      e.l2 = ws.l2[j];
+      e.l3 = ws.l3[j];
+      if (e.l2 <= grid_.alpha * e.l3) {
+        ws.classes[c] = CellClass::kLinear;
+        continue;
+      }
+      // The eigenvector only where it counts: the noise along the normal of a grid whose normal
+      // is pure noise (tilt >= 1, most grids beyond 2-3 m) is its isotropic noise, and such a
+      // grid gets no angle test either (see below).
+      double tilt = s.NormalTilt(e.l2);
+      // A grid no flatter than its own noise (l1 beyond the paper's beta l2, and a residual within
+      // the full ray noise) has a normal that is noise too, whatever l2 says: a large grid far
+      // away, whose lateral extent is below the depth noise, and whose smallest eigenvector then
+      // lies in the image plane. Its normal is treated as unknown, as that of a grid tilted by a
+      // radian or more.
+      if (depth_model && tilt < 1.0 && e.l1 > grid_.beta * e.l2 &&
+          e.l1 / s.k <= params_.planar_sigmas * params_.planar_sigmas * s.IsotropicMse()) {
+        tilt = 1.0;
+      }
+      const bool have_normal = !depth_model || tilt < 1.0;
+      if (have_normal) {  // the eigenvector, and l1 refined as its Rayleigh quotient
+        e.v1 = Eigen::Vector3d(ws.v1[0][j], ws.v1[1][j], ws.v1[2][j]);
+        e.l1 = ws.l1_refined[j];
+      }
+      const double mse = e.l1 / s.k;
+      const double noise_mse =
+          have_normal ? s.EffectiveMse(e.v1, tilt) : s.IsotropicMse();  // sigma_n,rms^2
+      bool planar = e.l1 <= grid_.beta * e.l2;
+      if (!planar && depth_model) {
+        planar = mse <= params_.planar_sigmas * params_.planar_sigmas * noise_mse;
+      }
+      if (!planar) {
+        ws.classes[c] = CellClass::kSpherical;
+        continue;
+      }
+      ws.classes[c] = CellClass::kPlanar;
+      CellInfo& ci = ws.info[c];
+      ci.m = s.Centroid();
+      if (depth_model) {
+        // Normal noise of a small grid: std ~ sigma_n / sqrt(l2) [rad].
+        const double ang = eta + params_.eta_sigmas * std::sqrt(noise_mse / std::max(e.l2, 1e-18));
+        if (ang >= 0.5 * M_PI || !have_normal) {
+          ci.n.setZero();  // no angle test: the growth never reads it
+          ci.cos_tol = -1.0;
+          ci.sin_tol = 1.0;
+        } else {
+          ci.n = e.v1.dot(ci.m) < 0 ? Eigen::Vector3d(-e.v1) : e.v1;
+          SinCosFirstQuadrant(ang, ci.sin_tol, ci.cos_tol);  // eta <= ang < pi / 2
+        }
+        // Seed order under the noise model: the paper's minimal MSE, plus the ray noise leaking in
+        // through the grid's normal uncertainty, so that grids whose normal is mostly noise (far
+        // away, where a fluke can give a tiny MSE with a random normal) seed last.
+        const double seed_tilt = std::min(1.0, tilt);
+        ws.seeds.push_back(seed_key(mse + s.IsotropicMse() * seed_tilt * seed_tilt, c));
       } else {
         ci.n = e.v1.dot(ci.m) < 0 ? Eigen::Vector3d(-e.v1) : e.v1;
-        SinCosFirstQuadrant(ang, ci.sin_tol, ci.cos_tol);  // eta <= ang < pi / 2
+        ci.cos_tol = cos_eta;
+        ws.seeds.push_back(seed_key(mse, c));  // Algorithm 2 line 4: minimal MSE first
       }
-      // Seed order under the noise model: the paper's minimal MSE, plus the ray noise leaking in
-      // through the grid's normal uncertainty, so that grids whose normal is mostly noise (far
-      // away, where a fluke can give a tiny MSE with a random normal) seed last.
-      const double seed_tilt = std::min(1.0, tilt);
-      ws.seeds.push_back(seed_key(mse + s.IsotropicMse() * seed_tilt * seed_tilt, c));
-    } else {
-      ci.n = e.v1.dot(ci.m) < 0 ? Eigen::Vector3d(-e.v1) : e.v1;
-      ci.cos_tol = cos_eta;
-      ws.seeds.push_back(seed_key(mse, c));  // Algorithm 2 line 4: minimal MSE first
     }
   }
 
