@@ -1,6 +1,8 @@
 #pragma once
 /// Flat, allocation-free moment sums and a closed-form 3x3 symmetric eigen solver: the inner loop
-/// of both region growers (one fit per tested grid or point, paper eq. 5-6).
+/// of both region growers (one fit per tested grid or point, paper eq. 5-6). Also the ray-fit
+/// sums, and the batch kernels of GBRG's per-grid passes (AVX2 where the CPU has it, chosen at
+/// run time).
 ///
 /// Sums are kept about the origin in double (K, S = sum p, Q = sum p p^T, 10 doubles). Inputs are
 /// float metres; with |p| < 100 m and K < 10^7 the cancellation in C = Q - S m^T (eq. 6) costs at
@@ -191,7 +193,8 @@ struct RaySums {
   }
 };
 
-/// The instruction set of a batch kernel (SumPixelBlock, SymEigenvaluesNewtonBatch).
+/// The instruction set of a batch kernel (SumPixelBlock, SumGridRow, SymEigenvaluesNewtonBatch,
+/// SmallestEigenvectorBatch).
 enum class SimdKernel {
   kScalar,  ///< the compiler's baseline (SSE2 on x86-64): any CPU
   kAvx2,    ///< AVX2 + FMA: four doubles at a time; only where FastestSimdKernel() says so
@@ -254,7 +257,7 @@ void SymEigenvaluesNewtonBatch(const double* const c[6], int n, double relative_
                                double* l1, double* l2, double* l3, double* ok,
                                SimdKernel kernel = FastestSimdKernel());
 
-/// sin(x) and cos(x) for x in [0, pi / 2] to ~1e-14, as two short polynomials: the growers'
+/// sin(x) and cos(x) for x in [0, pi / 2] to better than 1e-13, as two short polynomials: the growers'
 /// angle tolerances need both for every planar grid, where libm's sincos costs several times as
 /// much. About pi / 4: with y = x - pi / 4 in [-pi / 4, pi / 4], sin x = (sin y + cos y) / sqrt 2
 /// and cos x = (cos y - sin y) / sqrt 2, with Taylor series to y^13 and y^14.
