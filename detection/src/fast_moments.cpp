@@ -189,6 +189,17 @@ void SymEigenvaluesNewtonBatch(const double* const c[6], int n, double relative_
 
 namespace {
 
+/// (x, y, z) with squared norm n replaces (best_x, best_y, best_z) when n > best (a select).
+__attribute__((always_inline)) inline void TakeIfLonger(double n, double x, double y, double z,
+                                                        double& best, double& best_x,
+                                                        double& best_y, double& best_z) {
+  const bool longer = n > best;
+  best = longer ? n : best;
+  best_x = longer ? x : best_x;
+  best_y = longer ? y : best_y;
+  best_z = longer ? z : best_z;
+}
+
 /// SmallestEigenvector for one matrix, without branches (selects only), so that the batch loop
 /// below vectorises; the scalar function runs the same code.
 __attribute__((always_inline)) inline void SmallestEigenvectorLane(double c0, double c1, double c2,
@@ -206,14 +217,9 @@ __attribute__((always_inline)) inline void SmallestEigenvectorLane(double c0, do
   const double d0 = r1y * r2z - r1z * r2y, d1 = r1z * r2x - r1x * r2z, d2 = r1x * r2y - r1y * r2x;
   const double na = a0 * a0 + a1 * a1 + a2 * a2, nb = b0 * b0 + b1 * b1 + b2 * b2,
                nd = d0 * d0 + d1 * d1 + d2 * d2;
-  const bool take_b = nb > na;
-  double best = take_b ? nb : na;
-  double x = take_b ? b0 : a0, y = take_b ? b1 : a1, z = take_b ? b2 : a2;
-  const bool take_d = nd > best;
-  best = take_d ? nd : best;
-  x = take_d ? d0 : x;
-  y = take_d ? d1 : y;
-  z = take_d ? d2 : z;
+  double best = na, x = a0, y = a1, z = a2;
+  TakeIfLonger(nb, b0, b1, b2, best, x, y, z);
+  TakeIfLonger(nd, d0, d1, d2, best, x, y, z);
   const double scale = std::max(std::abs(l3), std::abs(l1));
   const bool separated = best > 1e-28 * scale * scale * scale * scale && best > 0.0;
   const double inv = 1.0 / std::sqrt(separated ? best : 1.0);
@@ -221,14 +227,9 @@ __attribute__((always_inline)) inline void SmallestEigenvectorLane(double c0, do
   // zero vector when that is orthogonal to the axis picked, as Eigen's normalized() gives).
   const double n0 = r0x * r0x + r0y * r0y + r0z * r0z, n1 = r1x * r1x + r1y * r1y + r1z * r1z,
                n2 = r2x * r2x + r2y * r2y + r2z * r2z;
-  const bool row1 = n1 > n0;
-  double rn = row1 ? n1 : n0;
-  double rx = row1 ? r1x : r0x, ry = row1 ? r1y : r0y, rz = row1 ? r1z : r0z;
-  const bool row2 = n2 > rn;
-  rn = row2 ? n2 : rn;
-  rx = row2 ? r2x : rx;
-  ry = row2 ? r2y : ry;
-  rz = row2 ? r2z : rz;
+  double rn = n0, rx = r0x, ry = r0y, rz = r0z;
+  TakeIfLonger(n1, r1x, r1y, r1z, rn, rx, ry, rz);
+  TakeIfLonger(n2, r2x, r2y, r2z, rn, rx, ry, rz);
   const double ax = std::abs(rx) < 0.9 ? 1.0 : 0.0, ay = 1.0 - ax;   // UnitX or UnitY
   const double ox = -rz * ay, oy = rz * ax, oz = rx * ay - ry * ax;  // row x any
   const double on = ox * ox + oy * oy + oz * oz;

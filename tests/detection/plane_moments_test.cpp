@@ -32,6 +32,13 @@ std::vector<Eigen::Vector3d> NoisyPlanePoints(int n, unsigned seed, double noise
   return pts;
 }
 
+/// The batch kernels this CPU runs: the baseline one, and AVX2 where present.
+std::vector<SimdKernel> KernelsOfThisCpu() {
+  std::vector<SimdKernel> kernels = {SimdKernel::kScalar};
+  if (FastestSimdKernel() == SimdKernel::kAvx2) kernels.push_back(SimdKernel::kAvx2);
+  return kernels;
+}
+
 double RelDiff(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
   return (a - b).norm() / std::max(1e-300, b.norm());
 }
@@ -135,8 +142,7 @@ TEST(FastMoments, BatchEigenvaluesMatchEigenOrDeferToTheClosedForm) {
   }
   const double* c[6];
   for (int j = 0; j < 6; ++j) c[j] = columns[j].data();
-  std::vector<SimdKernel> kernels = {SimdKernel::kScalar};
-  if (FastestSimdKernel() == SimdKernel::kAvx2) kernels.push_back(SimdKernel::kAvx2);
+  const std::vector<SimdKernel> kernels = KernelsOfThisCpu();
   for (SimdKernel kernel : kernels) {
     SCOPED_TRACE(::testing::Message() << "kernel " << static_cast<int>(kernel));
     std::vector<double> l1(kCount), l2(kCount), l3(kCount), ok(kCount);
@@ -189,8 +195,7 @@ TEST(FastMoments, BatchEigenvectorsEqualTheScalarOnes) {
   }
   const double* c[6];
   for (int j = 0; j < 6; ++j) c[j] = columns[j].data();
-  std::vector<SimdKernel> kernels = {SimdKernel::kScalar};
-  if (FastestSimdKernel() == SimdKernel::kAvx2) kernels.push_back(SimdKernel::kAvx2);
+  const std::vector<SimdKernel> kernels = KernelsOfThisCpu();
   for (SimdKernel kernel : kernels) {
     SCOPED_TRACE(::testing::Message() << "kernel " << static_cast<int>(kernel));
     std::vector<double> vx(kCount), vy(kCount), vz(kCount), refined(kCount);
@@ -250,8 +255,7 @@ TEST(FastMoments, PixelBlockSumsEqualPointByPointSumsOnEveryKernel) {
     if (i % 7 == 3) cloud[i].z() = std::numeric_limits<float>::quiet_NaN();
     if (i % 11 == 5) cloud[i].z() = -cloud[i].z();
   }
-  std::vector<SimdKernel> kernels = {SimdKernel::kScalar};
-  if (FastestSimdKernel() == SimdKernel::kAvx2) kernels.push_back(SimdKernel::kAvx2);
+  const std::vector<SimdKernel> kernels = KernelsOfThisCpu();
   DetectionParams kinect, laser;
   kinect.sigma0 = 0.0;  // uniform ray weight
   laser.sigma0 = 0.01;  // ray weight varies with the range
@@ -313,8 +317,7 @@ TEST(FastMoments, GridRowSumsEqualBlockSumsOnEveryKernel) {
     if (i % 13 == 4) cloud[i].z() = std::numeric_limits<float>::infinity();
     if (i % 11 == 5) cloud[i].z() = -cloud[i].z();
   }
-  std::vector<SimdKernel> kernels = {SimdKernel::kScalar};
-  if (FastestSimdKernel() == SimdKernel::kAvx2) kernels.push_back(SimdKernel::kAvx2);
+  const std::vector<SimdKernel> kernels = KernelsOfThisCpu();
   DetectionParams kinect, laser;
   kinect.sigma0 = 0.0;
   laser.sigma0 = 0.01;
