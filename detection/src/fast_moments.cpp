@@ -376,88 +376,7 @@ FastFit RefitFrom(const MomentSums& m, const Eigen::Vector3d& n0) {
 
 namespace {
 
-void SumPixelBlockScalar(const Eigen::Vector3f* points, int width, int x0, int y0, int x1, int y1,
-                         bool spherical, const DetectionParams& params, MomentSums& m,
-                         RaySums* rays) {
-  for (int y = y0; y < y1; ++y) {
-    const Eigen::Vector3f* row = points + static_cast<std::size_t>(y) * width;
-    for (int x = x0; x < x1; ++x) {
-      const Eigen::Vector3f& p = row[x];
-      if (!std::isfinite(p.z())) continue;
-      m.AddPosition(p.x(), p.y(), p.z());
-      if (rays == nullptr) continue;
-      const float s = internal::PointDepth(p, spherical);
-      if (s > 0.0f) rays->Add(p, s, params.RayFitWeight(s));
-    }
-  }
-}
-
 #ifdef PLANESLAM_X86
-/// SumPixelBlockScalar with the sums in AVX2 registers. With p = (x, y, z, 1), the four sums
-/// p x, p y, p z and p hold Q's rows next to S and K; with u = w (qx, qy, qz, 1/s), the sums
-/// u qx, u qy, u qz hold the ray fit's A next to b. Three fused multiply-adds each, where the
-/// scalar code spends nine multiplies and nine adds on each half.
-__attribute__((target("avx2,fma"))) void SumPixelBlockAvx2(const Eigen::Vector3f* points, int width,
-                                                           int x0, int y0, int x1, int y1,
-                                                           bool spherical,
-                                                           const DetectionParams& params,
-                                                           MomentSums& m, RaySums* rays) {
-  __m256d px = _mm256_setzero_pd(), py = px, pz = px, p1 = px;  // Q rows | S, and S | K
-  __m256d ux = px, uy = px, uz = px;                            // A rows | b
-  const bool uniform_weight = params.sigma0 == 0.0;             // RayFitWeight is 1
-  for (int y = y0; y < y1; ++y) {
-    const Eigen::Vector3f* row = points + static_cast<std::size_t>(y) * width;
-    for (int x = x0; x < x1; ++x) {
-      const Eigen::Vector3f& p = row[x];
-      if (!std::isfinite(p.z())) continue;
-      const __m128 pf = _mm_setr_ps(p.x(), p.y(), p.z(), 1.0f);
-      const __m256d pd = _mm256_cvtps_pd(pf);
-      px = _mm256_fmadd_pd(pd, _mm256_permute4x64_pd(pd, 0x00), px);
-      py = _mm256_fmadd_pd(pd, _mm256_permute4x64_pd(pd, 0x55), py);
-      pz = _mm256_fmadd_pd(pd, _mm256_permute4x64_pd(pd, 0xaa), pz);
-      p1 = _mm256_add_pd(pd, p1);
-      if (rays == nullptr) continue;
-      const float s = internal::PointDepth(p, spherical);
-      if (!(s > 0.0f)) continue;
-      // The ray (qx, qy, qz) = p / s formed in float as RaySums::Add does, and 1 / s beside it.
-      const __m256d q = _mm256_cvtps_pd(_mm_mul_ps(pf, _mm_set1_ps(1.0f / s)));
-      const __m256d u =
-          uniform_weight ? q : _mm256_mul_pd(q, _mm256_set1_pd(params.RayFitWeight(s)));
-      ux = _mm256_fmadd_pd(u, _mm256_permute4x64_pd(q, 0x00), ux);
-      uy = _mm256_fmadd_pd(u, _mm256_permute4x64_pd(q, 0x55), uy);
-      uz = _mm256_fmadd_pd(u, _mm256_permute4x64_pd(q, 0xaa), uz);
-    }
-  }
-  alignas(32) double r[4][4];
-  _mm256_store_pd(r[0], px);
-  _mm256_store_pd(r[1], py);
-  _mm256_store_pd(r[2], pz);
-  _mm256_store_pd(r[3], p1);
-  m.xx += r[0][0];
-  m.xy += r[0][1];
-  m.xz += r[0][2];
-  m.yy += r[1][1];
-  m.yz += r[1][2];
-  m.zz += r[2][2];
-  m.sx += r[3][0];
-  m.sy += r[3][1];
-  m.sz += r[3][2];
-  m.k += r[3][3];
-  if (rays == nullptr) return;
-  _mm256_store_pd(r[0], ux);
-  _mm256_store_pd(r[1], uy);
-  _mm256_store_pd(r[2], uz);
-  rays->a00 += r[0][0];
-  rays->a01 += r[0][1];
-  rays->a02 += r[0][2];
-  rays->a11 += r[1][1];
-  rays->a12 += r[1][2];
-  rays->a22 += r[2][2];
-  rays->b0 += r[0][3];
-  rays->b1 += r[1][3];
-  rays->b2 += r[2][3];
-}
-
 /// The four points p[0], p[stride], p[2 stride], p[3 stride] (floats, 3 a point) as x, y, z
 /// vectors of four lanes. Each load reads 16 bytes: the next point's x too (the caller makes sure
 /// that one exists).
@@ -476,7 +395,7 @@ __attribute__((target("avx2,fma"))) inline __m256d WidenMask(__m128 mask) {
   return _mm256_castsi256_pd(_mm256_cvtepi32_epi64(_mm_castps_si128(mask)));
 }
 
-/// SumPixelBlockScalar of four neighbouring k x k grids at once, one grid a lane: the grids whose
+/// SumPixelBlock of four neighbouring k x k grids at once, one grid a lane: the grids whose
 /// first columns are x0, x0 + k, x0 + 2k, x0 + 3k, rows [y0, y1). Each lane adds its pixels in the
 /// scalar kernel's order; invalid pixels add zeros (masked) instead of being skipped. The moments
 /// and the ray sums take a pass each (with 10 and 9 accumulators, each fits the 16 registers).
@@ -614,15 +533,18 @@ SimdKernel FastestSimdKernel() {
 }
 
 void SumPixelBlock(const Eigen::Vector3f* points, int width, int x0, int y0, int x1, int y1,
-                   bool spherical, const DetectionParams& params, MomentSums& m, RaySums* rays,
-                   SimdKernel kernel) {
-#ifdef PLANESLAM_X86
-  if (kernel == SimdKernel::kAvx2) {
-    SumPixelBlockAvx2(points, width, x0, y0, x1, y1, spherical, params, m, rays);
-    return;
+                   bool spherical, const DetectionParams& params, MomentSums& m, RaySums* rays) {
+  for (int y = y0; y < y1; ++y) {
+    const Eigen::Vector3f* row = points + static_cast<std::size_t>(y) * width;
+    for (int x = x0; x < x1; ++x) {
+      const Eigen::Vector3f& p = row[x];
+      if (!std::isfinite(p.z())) continue;
+      m.AddPosition(p.x(), p.y(), p.z());
+      if (rays == nullptr) continue;
+      const float s = internal::PointDepth(p, spherical);
+      if (s > 0.0f) rays->Add(p, s, params.RayFitWeight(s));
+    }
   }
-#endif
-  SumPixelBlockScalar(points, width, x0, y0, x1, y1, spherical, params, m, rays);
 }
 
 void SumGridRow(const Eigen::Vector3f* points, int width, int height, int y0, int y1, int k,
@@ -649,7 +571,7 @@ void SumGridRow(const Eigen::Vector3f* points, int width, int height, int y0, in
     sums[cx] = MomentSums();
     RaySums* r = rays != nullptr ? rays + cx : nullptr;
     if (r != nullptr) *r = RaySums();
-    SumPixelBlock(points, width, x0, y0, x1, y1, spherical, params, sums[cx], r, kernel);
+    SumPixelBlock(points, width, x0, y0, x1, y1, spherical, params, sums[cx], r);
   }
 }
 

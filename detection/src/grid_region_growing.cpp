@@ -272,6 +272,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     ws.mark[c] = ws.classes[c] == CellClass::kPlanar ? -1 : kTaken;
   }
   ws.regions.clear();
+  const bool adaptive_refit = grid_.refit_interval != 1;  // else the paper's refit per join
   const std::size_t theta_grids = static_cast<std::size_t>((params_.theta + k * k - 1) / (k * k));
   const int dx[4] = {1, -1, 0, 0};
   const int dy[4] = {0, 0, 1, -1};
@@ -357,8 +358,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       // The MSE test, with the cheap bound first: the noise along the normal alone is a lower
       // bound of the effective noise (its tilt term only adds), and the MSE about the current
       // normal an upper bound of the merged fit's, so either passing the test passes the exact one.
-      const bool adaptive = grid_.refit_interval != 1;
-      if (adaptive &&
+      if (adaptive_refit &&
           merged.MseAbout(fit.normal) < params_.Epsilon(merged.ExpectedMse(fit.normal), merged.k)) {
         region = merged;
         since_refit += 1;

@@ -206,7 +206,9 @@ TEST(FastMoments, BatchEigenvectorsEqualTheScalarOnes) {
       EXPECT_DOUBLE_EQ(vy[i], expected[i].v1.y()) << i;
       EXPECT_DOUBLE_EQ(vz[i], expected[i].v1.z()) << i;
       EXPECT_DOUBLE_EQ(refined[i], expected[i].l1) << i;
-      if (i % 60 != 4) EXPECT_NEAR(Eigen::Vector3d(vx[i], vy[i], vz[i]).norm(), 1.0, 1e-12) << i;
+      if (i % 60 != 4) {
+        EXPECT_NEAR(Eigen::Vector3d(vx[i], vy[i], vz[i]).norm(), 1.0, 1e-12) << i;
+      }
     }
   }
 }
@@ -243,7 +245,7 @@ TEST(FastMoments, IncrementalFitEqualsBatchFit) {
   }
 }
 
-TEST(FastMoments, PixelBlockSumsEqualPointByPointSumsOnEveryKernel) {
+TEST(FastMoments, PixelBlockSumsEqualPointByPointSums) {
   // A 7 x 5 block inside an 11 x 6 organized cloud: points 0.5-5 m away, some without depth (NaN),
   // some behind a scanner's origin (z < 0, range > 0).
   const int width = 11, height = 6, x0 = 2, y0 = 1, x1 = 9, y1 = 6;
@@ -255,7 +257,6 @@ TEST(FastMoments, PixelBlockSumsEqualPointByPointSumsOnEveryKernel) {
     if (i % 7 == 3) cloud[i].z() = std::numeric_limits<float>::quiet_NaN();
     if (i % 11 == 5) cloud[i].z() = -cloud[i].z();
   }
-  const std::vector<SimdKernel> kernels = KernelsOfThisCpu();
   DetectionParams kinect, laser;
   kinect.sigma0 = 0.0;  // uniform ray weight
   laser.sigma0 = 0.01;  // ray weight varies with the range
@@ -273,32 +274,29 @@ TEST(FastMoments, PixelBlockSumsEqualPointByPointSumsOnEveryKernel) {
         }
       }
       ASSERT_GT(expected.k, 20);
-      for (SimdKernel kernel : kernels) {
-        SCOPED_TRACE(::testing::Message() << "kernel " << static_cast<int>(kernel) << " spherical "
-                                          << spherical << " sigma0 " << params->sigma0);
-        MomentSums m;
-        RaySums rays;
-        SumPixelBlock(cloud.data(), width, x0, y0, x1, y1, spherical, *params, m, &rays, kernel);
-        const double got[] = {m.k, m.sx, m.sy, m.sz, m.xx, m.xy, m.xz, m.yy, m.yz, m.zz};
-        const double want[] = {expected.k,  expected.sx, expected.sy, expected.sz, expected.xx,
-                               expected.xy, expected.xz, expected.yy, expected.yz, expected.zz};
-        for (int i = 0; i < 10; ++i) EXPECT_NEAR(got[i], want[i], 1e-12 * (1 + std::abs(want[i])));
-        const double got_rays[] = {rays.a00, rays.a01, rays.a02, rays.a11, rays.a12,
-                                   rays.a22, rays.b0,  rays.b1,  rays.b2};
-        const double want_rays[] = {expected_rays.a00, expected_rays.a01, expected_rays.a02,
-                                    expected_rays.a11, expected_rays.a12, expected_rays.a22,
-                                    expected_rays.b0,  expected_rays.b1,  expected_rays.b2};
-        for (int i = 0; i < 9; ++i) {
-          EXPECT_NEAR(got_rays[i], want_rays[i], 1e-12 * (1 + std::abs(want_rays[i])));
-        }
-        EXPECT_EQ(m.wxx, 0.0);  // W is the caller's
-        // Without ray sums, the same moments.
-        MomentSums only;
-        SumPixelBlock(cloud.data(), width, x0, y0, x1, y1, spherical, *params, only, nullptr,
-                      kernel);
-        EXPECT_EQ(only.k, m.k);
-        EXPECT_NEAR(only.zz, m.zz, 1e-12 * m.zz);
+      SCOPED_TRACE(::testing::Message()
+                   << "spherical " << spherical << " sigma0 " << params->sigma0);
+      MomentSums m;
+      RaySums rays;
+      SumPixelBlock(cloud.data(), width, x0, y0, x1, y1, spherical, *params, m, &rays);
+      const double got[] = {m.k, m.sx, m.sy, m.sz, m.xx, m.xy, m.xz, m.yy, m.yz, m.zz};
+      const double want[] = {expected.k,  expected.sx, expected.sy, expected.sz, expected.xx,
+                             expected.xy, expected.xz, expected.yy, expected.yz, expected.zz};
+      for (int i = 0; i < 10; ++i) EXPECT_NEAR(got[i], want[i], 1e-12 * (1 + std::abs(want[i])));
+      const double got_rays[] = {rays.a00, rays.a01, rays.a02, rays.a11, rays.a12,
+                                 rays.a22, rays.b0,  rays.b1,  rays.b2};
+      const double want_rays[] = {expected_rays.a00, expected_rays.a01, expected_rays.a02,
+                                  expected_rays.a11, expected_rays.a12, expected_rays.a22,
+                                  expected_rays.b0,  expected_rays.b1,  expected_rays.b2};
+      for (int i = 0; i < 9; ++i) {
+        EXPECT_NEAR(got_rays[i], want_rays[i], 1e-12 * (1 + std::abs(want_rays[i])));
       }
+      EXPECT_EQ(m.wxx, 0.0);  // W is the caller's
+      // Without ray sums, the same moments.
+      MomentSums only;
+      SumPixelBlock(cloud.data(), width, x0, y0, x1, y1, spherical, *params, only, nullptr);
+      EXPECT_EQ(only.k, m.k);
+      EXPECT_NEAR(only.zz, m.zz, 1e-12 * m.zz);
     }
   }
 }
@@ -339,7 +337,7 @@ TEST(FastMoments, GridRowSumsEqualBlockSumsOnEveryKernel) {
               MomentSums want;
               RaySums want_rays;
               SumPixelBlock(cloud.data(), width, cx * k, y0, std::min(width, cx * k + k), y1,
-                            spherical, *params, want, &want_rays, SimdKernel::kScalar);
+                            spherical, *params, want, &want_rays);
               const MomentSums& m = sums[cx];
               const RaySums& r = rays[cx];
               const double got[] = {m.k,   m.sx,  m.sy, m.sz,  m.xx,  m.xy,  m.xz,

@@ -193,7 +193,7 @@ struct RaySums {
   }
 };
 
-/// The instruction set of a batch kernel (SumPixelBlock, SumGridRow, SymEigenvaluesNewtonBatch,
+/// The instruction set of a batch kernel (SumGridRow, SymEigenvaluesNewtonBatch,
 /// SmallestEigenvectorBatch).
 enum class SimdKernel {
   kScalar,  ///< the compiler's baseline (SSE2 on x86-64): any CPU
@@ -205,17 +205,17 @@ SimdKernel FastestSimdKernel();
 /// Adds to `m` K, S and Q (not W) of the pixels of the block [x0, x1) x [y0, y1) of an organized
 /// cloud (row-major, `width` points a row) whose z is finite, and, when `rays` is not null, to
 /// `rays` those of them at depth s > 0 (z, or the range when `spherical`) with weight
-/// params.RayFitWeight(s). GBRG's per-grid pass. Both kernels add the pixels in the same order;
-/// their results differ by the rounding of fused multiply-adds only (~1e-16 relative).
+/// params.RayFitWeight(s). The reference for SumGridRow, which uses it where its four-grid
+/// kernel does not apply.
 void SumPixelBlock(const Eigen::Vector3f* points, int width, int x0, int y0, int x1, int y1,
-                   bool spherical, const DetectionParams& params, MomentSums& m, RaySums* rays,
-                   SimdKernel kernel);
+                   bool spherical, const DetectionParams& params, MomentSums& m, RaySums* rays);
 
 /// SumPixelBlock of every k x k grid of one row of grids: grid cx covers columns
 /// [cx k, min(width, cx k + k)) of rows [y0, y1) of an organized cloud of width x height points,
 /// and its sums are written to sums[cx] (and rays[cx] when `rays` is not null), for cx in
 /// [0, ceil(width / k)). W is left 0. The AVX2 kernel sums four neighbouring grids at once, one a
-/// lane, in the same pixel order as SumPixelBlock.
+/// lane, in the same pixel order as SumPixelBlock; their results differ by the rounding of fused
+/// multiply-adds only (~1e-16 relative).
 void SumGridRow(const Eigen::Vector3f* points, int width, int height, int y0, int y1, int k,
                 bool spherical, const DetectionParams& params, MomentSums* sums, RaySums* rays,
                 SimdKernel kernel);
@@ -257,10 +257,10 @@ void SymEigenvaluesNewtonBatch(const double* const c[6], int n, double relative_
                                double* l1, double* l2, double* l3, double* ok,
                                SimdKernel kernel = FastestSimdKernel());
 
-/// sin(x) and cos(x) for x in [0, pi / 2] to better than 1e-13, as two short polynomials: the growers'
-/// angle tolerances need both for every planar grid, where libm's sincos costs several times as
-/// much. About pi / 4: with y = x - pi / 4 in [-pi / 4, pi / 4], sin x = (sin y + cos y) / sqrt 2
-/// and cos x = (cos y - sin y) / sqrt 2, with Taylor series to y^13 and y^14.
+/// sin(x) and cos(x) for x in [0, pi / 2] to better than 1e-13, as two short polynomials: the
+/// growers' angle tolerances need both for every planar grid, where libm's sincos costs several
+/// times as much. About pi / 4: with y = x - pi / 4 in [-pi / 4, pi / 4], sin x = (sin y + cos y) /
+/// sqrt 2 and cos x = (cos y - sin y) / sqrt 2, with Taylor series to y^13 and y^14.
 inline void SinCosFirstQuadrant(double x, double& sin_x, double& cos_x) {
   const double y = x - 0.78539816339744830962, y2 = y * y;
   const double sin_y =
