@@ -523,6 +523,35 @@ __attribute__((target("avx2,fma"))) void SumFourGridsAvx2(const Eigen::Vector3f*
 
 }  // namespace
 
+#ifdef PLANESLAM_X86
+namespace {
+__attribute__((target("avx2"))) std::size_t MapLabelsAvx2(const std::int32_t* shifted_table,
+                                                           const std::int32_t* in,
+                                                           std::int32_t* out, std::size_t n) {
+  const __m256i one = _mm256_set1_epi32(1);
+  std::size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    const __m256i index =
+        _mm256_add_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(in + i)), one);
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + i),
+                        _mm256_i32gather_epi32(shifted_table, index, 4));
+  }
+  return i;
+}
+}  // namespace
+#endif
+
+void MapLabels(const std::int32_t* shifted_table, const std::int32_t* in, std::int32_t* out,
+               std::size_t n, SimdKernel kernel) {
+  std::size_t i = 0;
+#ifdef PLANESLAM_X86
+  if (kernel == SimdKernel::kAvx2) i = MapLabelsAvx2(shifted_table, in, out, n);
+#else
+  (void)kernel;
+#endif
+  for (; i < n; ++i) out[i] = shifted_table[in[i] + 1];
+}
+
 SimdKernel FastestSimdKernel() {
 #ifdef PLANESLAM_X86
   static const bool avx2 = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");

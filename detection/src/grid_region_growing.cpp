@@ -61,6 +61,7 @@ struct Workspace {
   std::vector<MomentSums> regions;
   std::vector<FastFit> fits;
   std::vector<std::int32_t> labels;
+  std::vector<std::int32_t> row_labels;  ///< one row of grid labels expanded to pixels
   std::vector<RaySums> grid_rays;  ///< ray sums of each grid's pixels (ray fit)
   std::vector<RaySums> rays;       ///< ray sums of each region
   std::vector<int> edge_grids;     ///< grids with a neighbour outside their region
@@ -274,6 +275,10 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   ws.regions.clear();
   const bool adaptive_refit = grid_.refit_interval != 1;  // else the paper's refit per join
   const std::size_t theta_grids = static_cast<std::size_t>((params_.theta + k * k - 1) / (k * k));
+  // A grid's row without an integer division (tens of cycles, once per joined grid):
+  // (c + 0.5) / cells_x is at least 0.5 / cells_x from an integer, far beyond its rounding.
+  const double inv_cells_x = 1.0 / cells_x;
+  auto row_of = [inv_cells_x](int c) { return static_cast<int>((c + 0.5) * inv_cells_x); };
   const int dx[4] = {1, -1, 0, 0};
   const int dy[4] = {0, 0, 1, -1};
   auto grow_from = [&](int seed) {
@@ -298,7 +303,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     ws.queue.clear();
     std::size_t head = 0;
     auto push_neighbours = [&](int c) {
-      const int cx = c % cells_x, cy = c / cells_x;
+      const int cy = row_of(c), cx = c - cy * cells_x;
       for (int i = 0; i < 4; ++i) {
         const int nx = cx + dx[i], ny = cy + dy[i];
         if (nx < 0 || ny < 0 || nx >= cells_x || ny >= cells_y) continue;
@@ -358,8 +363,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       // The MSE test, with the cheap bound first: the noise along the normal alone is a lower
       // bound of the effective noise (its tilt term only adds), and the MSE about the current
       // normal an upper bound of the merged fit's, so either passing the test passes the exact one.
-      if (adaptive_refit &&
-          merged.MseAbout(fit.normal) < params_.Epsilon(merged.ExpectedMse(fit.normal), merged.k)) {
+      if (adaptive_refit && MseAboutWithinEpsilon(merged, fit.normal, params_)) {
         region = merged;
         since_refit += 1;
         const int interval = grid_.refit_interval > 0
@@ -422,24 +426,31 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
 
   // ---- 4. Pixel labels; boundary refinement of the grids outside every plane.
   const auto t3 = Clock::now();
-  ws.labels.assign(static_cast<std::size_t>(width) * height, -1);
-  for (int y = 0; y < height; ++y) {
-    const std::size_t cell_row = static_cast<std::size_t>(y / k) * cells_x;
+  // Each band of k rows is written once: a row of grid labels expanded to pixels, copied to every
+  // row of the band, then the invalid pixels of partly valid grids in a plane set to -1.
+  ws.labels.resize(static_cast<std::size_t>(width) * height);
+  ws.row_labels.resize(width);
+  for (int cy = 0; cy < cells_y; ++cy) {
+    const int y0 = cy * k, y1 = std::min(height, y0 + k);
+    const std::size_t cell_row = static_cast<std::size_t>(cy) * cells_x;
     const std::int32_t* creg = ws.cell_region.data() + cell_row;
     const std::int32_t* ccount = ws.counts.data() + cell_row;
-    std::int32_t* lrow = ws.labels.data() + static_cast<std::size_t>(y) * width;
-    const Eigen::Vector3f* row = pts + static_cast<std::size_t>(y) * width;
-    const int full = k * std::min(k, height - y / k * k);  // pixels of a grid of this row
     for (int cx = 0; cx < cells_x; ++cx) {
-      const std::int32_t r = creg[cx];
-      if (r < 0) continue;
+      std::fill_n(ws.row_labels.data() + cx * k, std::min(k, width - cx * k), creg[cx]);
+    }
+    for (int y = y0; y < y1; ++y) {
+      std::int32_t* dst = ws.labels.data() + static_cast<std::size_t>(y) * width;
+      const std::int32_t* src = ws.row_labels.data();
+      for (int x = 0; x < width; ++x) dst[x] = src[x];
+    }
+    for (int cx = 0; cx < cells_x; ++cx) {
       const int x0 = cx * k, x1 = std::min(width, x0 + k);
-      if (ccount[cx] == full && x1 - x0 == k) {  // every pixel valid: no need to look
-        std::fill(lrow + x0, lrow + x1, r);
-        continue;
-      }
-      for (int x = x0; x < x1; ++x) {
-        if (std::isfinite(row[x].z())) lrow[x] = r;
+      if (creg[cx] < 0 || ccount[cx] == (x1 - x0) * (y1 - y0)) continue;
+      for (int y = y0; y < y1; ++y) {
+        const std::size_t row = static_cast<std::size_t>(y) * width;
+        for (int x = x0; x < x1; ++x) {
+          if (!std::isfinite(pts[row + x].z())) ws.labels[row + x] = -1;
+        }
       }
     }
   }

@@ -184,9 +184,8 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
           // the normal alone, which the tilt term only raises): within that, no roots needed.
           const double dist = std::abs(fit.normal.dot(pc) - fit.d);
           if (dist >= params_.gamma && dist >= gamma_for(fit, region)) continue;
-          const double mse_about = merged.MseAbout(fit.normal);
-          if (mse_about < params_.Epsilon(merged.ExpectedMse(fit.normal), merged.k) ||
-              mse_about <
+          if (MseAboutWithinEpsilon(merged, fit.normal, params_) ||
+              merged.MseAbout(fit.normal) <
                   params_.Epsilon(merged.EffectiveMse(fit.normal, merged.NormalTilt(fit.l2)),
                                   merged.k)) {
             accept = true;

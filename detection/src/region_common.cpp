@@ -338,7 +338,7 @@ void MergeCoplanarRegions(std::vector<std::int32_t>& labels,
   // to itself without a branch.
   std::vector<std::int32_t> root(static_cast<std::size_t>(n) + 1, -1);
   for (int i = 0; i < n; ++i) root[static_cast<std::size_t>(i) + 1] = Find(parent, i);
-  for (auto& l : labels) l = root[static_cast<std::size_t>(l + 1)];
+  MapLabels(root.data(), labels.data(), labels.data(), labels.size());
 }
 
 void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
@@ -386,9 +386,7 @@ void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
     out.planes.push_back(std::move(p));
   }
   out.labels.resize(region_labels.size());
-  for (std::size_t i = 0; i < region_labels.size(); ++i) {
-    out.labels[i] = id_of[static_cast<std::size_t>(region_labels[i] + 1)];  // -1 stays -1
-  }
+  MapLabels(id_of.data(), region_labels.data(), out.labels.data(), region_labels.size());
 }
 
 void FinalizeLabelImage(const datasets::OrganizedCloud& cloud, std::vector<std::int32_t>& labels,

@@ -371,6 +371,60 @@ TEST(FastMoments, FirstQuadrantSinCosMatchesTheLibrary) {
   EXPECT_LT(worst, 1e-13);
 }
 
+TEST(FastMoments, DivisionFreeEpsilonTestEqualsThePlainOne) {
+  // Noisy planes of many sizes and noise levels, tested about normals tilted from the fitted one
+  // by up to 0.2 degrees, under both threshold models and with the count term on and off: the
+  // growers' division-free test agrees with MseAbout < Epsilon(ExpectedMse) wherever the two
+  // sides differ by more than rounding.
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> uni(-1.0, 1.0);
+  int decided = 0, accepted = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    const double noise = 0.0005 * (1 + trial % 20);
+    const auto pts = NoisyPlanePoints(3 + trial * 7 % 500, 100 + trial, noise,
+                                      Eigen::Vector3d(uni(rng), uni(rng), 2.0), 1.0 + trial % 4);
+    MomentSums m;
+    for (const auto& p : pts) m.Add(p.x(), p.y(), p.z(), 1e-6 * (1 + trial % 5));
+    const Eigen::Vector3d tilt(uni(rng), uni(rng), uni(rng));
+    const Eigen::Vector3d n = (FitSums(m).normal + 0.001 * (trial % 4) * tilt).normalized();
+    DetectionParams params;
+    params.model = trial % 3 == 0 ? ThresholdModel::kConstant : ThresholdModel::kDepth;
+    params.epsilon = 2e-6 * (1 + trial % 7);
+    params.epsilon_sigmas = 0.5 * (trial % 4);
+    params.epsilon_count_sigmas = trial % 2 == 0 ? 0.0 : 1.0;
+    const double lhs = m.MseAbout(n), rhs = params.Epsilon(m.ExpectedMse(n), m.k);
+    if (std::abs(lhs - rhs) <= 1e-9 * rhs) continue;  // at the boundary either answer is right
+    ++decided;
+    accepted += lhs < rhs;
+    EXPECT_EQ(MseAboutWithinEpsilon(m, n, params), lhs < rhs) << trial;
+  }
+  // Both outcomes were exercised.
+  EXPECT_GT(decided, 390);
+  EXPECT_GT(accepted, 50);
+  EXPECT_LT(accepted, decided - 50);
+}
+
+TEST(FastMoments, MapLabelsEqualsTheTableLookupOnEveryKernel) {
+  // A table indexed from -1 and label images of every length around the eight-pixel step, mapped
+  // to another image and in place.
+  const std::vector<std::int32_t> shifted_table = {-1, 5, 3, -1, 9, 1};
+  std::mt19937 rng(3);
+  std::uniform_int_distribution<int> label(-1, 4);
+  for (const SimdKernel kernel : KernelsOfThisCpu()) {
+    for (std::size_t n : {0, 1, 7, 8, 9, 16, 31, 1000}) {
+      std::vector<std::int32_t> in(n), out(n, 42), expected(n);
+      for (std::size_t i = 0; i < n; ++i) {
+        in[i] = label(rng);
+        expected[i] = shifted_table[static_cast<std::size_t>(in[i] + 1)];
+      }
+      MapLabels(shifted_table.data(), in.data(), out.data(), n, kernel);
+      EXPECT_EQ(out, expected) << n;
+      MapLabels(shifted_table.data(), in.data(), in.data(), n, kernel);
+      EXPECT_EQ(in, expected) << n;
+    }
+  }
+}
+
 TEST(PlaneCovariance, RankThreePsdNullAlongNormalAndScalesWithNoise) {
   const Eigen::Vector3d n = Eigen::Vector3d(0.2, 0.1, 1).normalized();
   const auto pts = NoisyPlanePoints(2000, 7, 0.0, n, 3.0);

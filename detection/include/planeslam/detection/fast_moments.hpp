@@ -13,11 +13,10 @@
 #include <cmath>
 #include <cstdint>
 
+#include "planeslam/detection/detection_config.hpp"
 #include "planeslam/detection/plane_moments.hpp"
 
 namespace planeslam::detection {
-
-struct DetectionParams;
 
 /// Sufficient statistics of a point set plus its noise moment W (used by the depth-dependent
 /// thresholds and the covariance). Plain aggregate: Add/Merge are a few adds.
@@ -144,6 +143,33 @@ struct MomentSums {
   PlaneMoments ToPlaneMoments() const;
 };
 
+/// Whether m.MseAbout(n) < params.Epsilon(m.ExpectedMse(n), m.k): the growers' test of a join
+/// between refits, once per tested grid or point. The same inequality without a division or a
+/// square root, whose latencies chain through every test: with M the MSE about n, E the expected
+/// MSE, eps the base epsilon and s its sigmas, M < (sqrt(eps) + s sqrt(E))^2 holds iff
+/// D = M - eps - s^2 E < 2 s sqrt(eps E), i.e. D < 0 or D^2 < 4 s^2 eps E; both sides are
+/// multiplied by K^2 (resp. K^4) to drop the divisions. Equal to the plain test but for rounding
+/// (~1e-16 relative) at the boundary.
+inline bool MseAboutWithinEpsilon(const MomentSums& m, const Eigen::Vector3d& n,
+                                  const DetectionParams& params) {
+  const double k = m.k;
+  if (!(k > 0)) return true;  // no points: MSE 0
+  const double nqn = m.xx * n.x() * n.x() + m.yy * n.y() * n.y() + m.zz * n.z() * n.z() +
+                     2.0 * (m.xy * n.x() * n.y() + m.xz * n.x() * n.z() + m.yz * n.y() * n.z());
+  const double ns = m.sx * n.x() + m.sy * n.y() + m.sz * n.z();
+  const double k2_mse = std::max(0.0, k * nqn - ns * ns);  // K^2 MseAbout(n)
+  const double k2 = k * k;
+  if (params.model != ThresholdModel::kDepth) return k2_mse < params.epsilon * k2;
+  const double sigmas =
+      params.epsilon_count_sigmas > 0.0
+          ? params.epsilon_sigmas + params.epsilon_count_sigmas * std::sqrt(2.0 / std::max(k, 1.0))
+          : params.epsilon_sigmas;
+  const double k2_expected = std::max(0.0, k * m.NoiseAlong(n));  // K^2 ExpectedMse(n)
+  const double s2 = sigmas * sigmas;
+  const double k2_d = k2_mse - params.epsilon * k2 - s2 * k2_expected;
+  return k2_d < 0.0 || k2_d * k2_d < 4.0 * s2 * params.epsilon * k2_expected * k2;
+}
+
 /// Normal equations of the ray fit of one region: 1/s_i = m.q_i with q_i = p_i / s_i the ray
 /// of pixel i scaled to unit depth (unit range for a scanner) and m = n / d; A = sum w q q^T
 /// (upper triangle), b = sum w q / s.
@@ -219,6 +245,12 @@ void SumPixelBlock(const Eigen::Vector3f* points, int width, int x0, int y0, int
 void SumGridRow(const Eigen::Vector3f* points, int width, int height, int y0, int y1, int k,
                 bool spherical, const DetectionParams& params, MomentSums* sums, RaySums* rays,
                 SimdKernel kernel);
+
+/// out[i] = shifted_table[in[i] + 1] for i < n, every in[i] >= -1 (a label image through a table
+/// indexed from -1: region -> merged region, region -> plane id). Eight pixels per gather with
+/// AVX2, where the plain loop reads one label at a time. `out` may be `in`.
+void MapLabels(const std::int32_t* shifted_table, const std::int32_t* in, std::int32_t* out,
+               std::size_t n, SimdKernel kernel = FastestSimdKernel());
 
 /// Eigen decomposition of a symmetric 3x3 matrix as needed by plane fitting.
 struct SymEigen3 {
