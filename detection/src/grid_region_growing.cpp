@@ -37,6 +37,8 @@ constexpr int kClassifyChunk = 1024;
 
 /// How many queue places ahead the growth prefetches grid data.
 constexpr std::size_t kPrefetchAhead = 6;
+/// How many edge grids ahead the refinement prefetches their points.
+constexpr std::size_t kRefinePrefetchAhead = 4;
 
 /// Per-thread buffers reused across frames (no allocation per frame once warmed up).
 struct Workspace {
@@ -104,6 +106,11 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   const int k = grid_.cell_size;
   const int cells_x = (width + k - 1) / k, cells_y = (height + k - 1) / k;
   const int num_cells = cells_x * cells_y;
+  // A grid's row without an integer division (tens of cycles, in the per-grid loops of growth and
+  // refinement): (c + 0.5) / cells_x is at least 0.5 / cells_x from an integer, far beyond its
+  // rounding.
+  const double inv_cells_x = 1.0 / std::max(cells_x, 1);
+  auto row_of = [inv_cells_x](int c) { return static_cast<int>((c + 0.5) * inv_cells_x); };
   out.width = width;
   out.height = height;
   out.cells_x = cells_x;
@@ -275,10 +282,6 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   ws.regions.clear();
   const bool adaptive_refit = grid_.refit_interval != 1;  // else the paper's refit per join
   const std::size_t theta_grids = static_cast<std::size_t>((params_.theta + k * k - 1) / (k * k));
-  // A grid's row without an integer division (tens of cycles, once per joined grid):
-  // (c + 0.5) / cells_x is at least 0.5 / cells_x from an integer, far beyond its rounding.
-  const double inv_cells_x = 1.0 / cells_x;
-  auto row_of = [inv_cells_x](int c) { return static_cast<int>((c + 0.5) * inv_cells_x); };
   const int dx[4] = {1, -1, 0, 0};
   const int dy[4] = {0, 0, 1, -1};
   auto grow_from = [&](int seed) {
@@ -523,8 +526,23 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     float cand[9][4];       // the candidate planes of a grid: n, d
     MomentSums gained[10];  // per candidate plane of the grid (and none): what it gains
     RaySums gained_rays[10];
-    for (const int c : ws.edge_grids) {
-      const int cx = c % cells_x, cy = c / cells_x;
+    const std::size_t num_edge = ws.edge_grids.size();
+    for (std::size_t e = 0; e < num_edge; ++e) {
+      const int c = ws.edge_grids[e];
+      // The points of an edge grid were last read by the moments pass and have left the core's
+      // caches since; the edge grids come with gaps the hardware prefetcher does not follow.
+      // Fetch the rows of the grid a few places ahead (first and last point of each row).
+      if (e + kRefinePrefetchAhead < num_edge) {
+        const int ahead = ws.edge_grids[e + kRefinePrefetchAhead];
+        const int ay = row_of(ahead), ax = ahead - ay * cells_x;
+        const int ay1 = std::min(height, ay * k + k), ax1 = std::min(width, ax * k + k) - 1;
+        for (int y = ay * k; y < ay1; ++y) {
+          const std::size_t row = static_cast<std::size_t>(y) * width;
+          __builtin_prefetch(pts + row + ax * k);
+          __builtin_prefetch(pts + row + ax1);
+        }
+      }
+      const int cy = row_of(c), cx = c - cy * cells_x;
       const int own = ws.cell_region[c];
       int adj[9];
       int n_adj = 0;
@@ -644,7 +662,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   if (params_.merge_regions || params_.ray_fit) {
     internal::RegionBorderScan scan(ws.labels, width, height);
     for (const int c : ws.edge_grids) {
-      const int cx = c % cells_x, cy = c / cells_x;
+      const int cy = row_of(c), cx = c - cy * cells_x;
       scan.Scan(cx * k, cy * k, std::min(width, (cx + 1) * k), std::min(height, (cy + 1) * k));
     }
     borders = scan.Finish();
