@@ -430,7 +430,9 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // ---- 4. Pixel labels; boundary refinement of the grids outside every plane.
   const auto t3 = Clock::now();
   // Each band of k rows is written once: a row of grid labels expanded to pixels, copied to every
-  // row of the band, then the invalid pixels of partly valid grids in a plane set to -1.
+  // row of the band, then the invalid pixels of partly valid grids in a plane set to -1. The copy
+  // is a plain loop: with memcpy (rep movsb on the Zen 3 development machine) the stages that read
+  // the labels next ran 0.2 ms slower.
   ws.labels.resize(static_cast<std::size_t>(width) * height);
   ws.row_labels.resize(width);
   for (int cy = 0; cy < cells_y; ++cy) {

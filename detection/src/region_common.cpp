@@ -200,12 +200,14 @@ void RegionBorderScan::Scan(int x0, int y0, int x1, int y1) {
       const std::size_t i = static_cast<std::size_t>(y) * w + x;
       const std::int32_t r = labels[i];
       if (r < 0) continue;
-      // Most pixels, even in the grids scanned, have no other region around: a few tests each.
       const std::int32_t left = x > 0 ? labels[i - 1] : r;
       const std::int32_t right = x + 1 < width_ ? labels[i + 1] : r;
       const std::int32_t up = y > 0 ? labels[i - w] : r;
       const std::int32_t down = y + 1 < height_ ? labels[i + w] : r;
-      auto other = [r](std::int32_t o) { return o >= 0 && o != r; };
+      auto other = [r](std::int32_t o) { return (o >= 0) & (o != r); };
+      // Most pixels, even in the grids scanned, have no other region around: one branch for the
+      // four neighbours, taken the same way along a region's interior.
+      if (!(other(left) | other(right) | other(up) | other(down))) continue;
       if (other(left)) Add(i, r, i - 1);
       if (other(right)) Add(i, r, i + 1);
       if (other(up)) Add(i, r, i - w);
