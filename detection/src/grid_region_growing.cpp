@@ -106,11 +106,14 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   const int k = grid_.cell_size;
   const int cells_x = (width + k - 1) / k, cells_y = (height + k - 1) / k;
   const int num_cells = cells_x * cells_y;
-  // A grid's row without an integer division (tens of cycles, in the per-grid loops of growth and
-  // refinement): (c + 0.5) / cells_x is at least 0.5 / cells_x from an integer, far beyond its
-  // rounding.
+  // A grid's column and row without an integer division (tens of cycles, in the per-grid loops of
+  // growth and refinement): (c + 0.5) / cells_x is at least 0.5 / cells_x from an integer, far
+  // beyond its rounding.
   const double inv_cells_x = 1.0 / std::max(cells_x, 1);
-  auto row_of = [inv_cells_x](int c) { return static_cast<int>((c + 0.5) * inv_cells_x); };
+  auto grid_xy = [inv_cells_x, cells_x](int c) {
+    const int cy = static_cast<int>((c + 0.5) * inv_cells_x);
+    return std::pair<int, int>(c - cy * cells_x, cy);
+  };
   out.width = width;
   out.height = height;
   out.cells_x = cells_x;
@@ -306,7 +309,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     ws.queue.clear();
     std::size_t head = 0;
     auto push_neighbours = [&](int c) {
-      const int cy = row_of(c), cx = c - cy * cells_x;
+      const auto [cx, cy] = grid_xy(c);
       for (int i = 0; i < 4; ++i) {
         const int nx = cx + dx[i], ny = cy + dy[i];
         if (nx < 0 || ny < 0 || nx >= cells_x || ny >= cells_y) continue;
@@ -536,7 +539,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       // Fetch the rows of the grid a few places ahead (first and last point of each row).
       if (e + kRefinePrefetchAhead < num_edge) {
         const int ahead = ws.edge_grids[e + kRefinePrefetchAhead];
-        const int ay = row_of(ahead), ax = ahead - ay * cells_x;
+        const auto [ax, ay] = grid_xy(ahead);
         const int ay1 = std::min(height, ay * k + k), ax1 = std::min(width, ax * k + k) - 1;
         for (int y = ay * k; y < ay1; ++y) {
           const std::size_t row = static_cast<std::size_t>(y) * width;
@@ -544,7 +547,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
           __builtin_prefetch(pts + row + ax1);
         }
       }
-      const int cy = row_of(c), cx = c - cy * cells_x;
+      const auto [cx, cy] = grid_xy(c);
       const int own = ws.cell_region[c];
       int adj[9];
       int n_adj = 0;
@@ -664,7 +667,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   if (params_.merge_regions || params_.ray_fit) {
     internal::RegionBorderScan scan(ws.labels, width, height);
     for (const int c : ws.edge_grids) {
-      const int cy = row_of(c), cx = c - cy * cells_x;
+      const auto [cx, cy] = grid_xy(c);
       scan.Scan(cx * k, cy * k, std::min(width, (cx + 1) * k), std::min(height, (cy + 1) * k));
     }
     borders = scan.Finish();

@@ -101,13 +101,16 @@ struct DetectionParams {
   /// MSE bound for a region whose expected MSE under the noise model is `expected_mse` [m^2].
   double Epsilon(double expected_mse, double k) const {
     if (model != ThresholdModel::kDepth) return epsilon;
-    // The count term costs a sqrt on the growers' hot path: only when it is in use.
-    const double sigmas =
-        epsilon_count_sigmas > 0.0
-            ? epsilon_sigmas + epsilon_count_sigmas * std::sqrt(2.0 / std::max(k, 1.0))
-            : epsilon_sigmas;
-    const double r = std::sqrt(epsilon) + sigmas * std::sqrt(std::max(expected_mse, 0.0));
+    const double r =
+        std::sqrt(epsilon) + EpsilonSigmas(k) * std::sqrt(std::max(expected_mse, 0.0));
     return r * r;
+  }
+  /// Depth model: how many rms sigma_n a region of k points may add to sqrt(epsilon) (Epsilon).
+  double EpsilonSigmas(double k) const {
+    // The count term costs a sqrt on the growers' hot path: only when it is in use.
+    return epsilon_count_sigmas > 0.0
+               ? epsilon_sigmas + epsilon_count_sigmas * std::sqrt(2.0 / std::max(k, 1.0))
+               : epsilon_sigmas;
   }
   /// Problems with the values (empty when fine).
   std::vector<std::string> Validate() const;

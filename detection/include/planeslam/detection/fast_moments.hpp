@@ -132,10 +132,15 @@ struct MomentSums {
   /// (n^T Q n - (n.S)^2 / K) / K: at least the fitted MSE lambda_min / K, equal to it when n is
   /// the fitted normal. The growers' cheap MSE test between refits.
   double MseAbout(const Eigen::Vector3d& n) const {
-    const double nqn = xx * n.x() * n.x() + yy * n.y() * n.y() + zz * n.z() * n.z() +
-                       2.0 * (xy * n.x() * n.y() + xz * n.x() * n.z() + yz * n.y() * n.z());
-    const double ns = sx * n.x() + sy * n.y() + sz * n.z();
+    double nqn, ns;
+    AlongNormal(n, nqn, ns);
     return std::max(0.0, nqn - ns * ns / k) / k;
+  }
+  /// n^T Q n [m^2] and n.S [m]: the second and first moments along unit normal n (MseAbout).
+  void AlongNormal(const Eigen::Vector3d& n, double& nqn, double& ns) const {
+    nqn = xx * n.x() * n.x() + yy * n.y() * n.y() + zz * n.z() * n.z() +
+          2.0 * (xy * n.x() * n.y() + xz * n.x() * n.z() + yz * n.y() * n.z());
+    ns = sx * n.x() + sy * n.y() + sz * n.z();
   }
   /// C = Q - S m^T (eq. 6) as the upper triangle {c00, c01, c02, c11, c12, c22}.
   void Scatter(double c[6]) const;
@@ -153,17 +158,13 @@ struct MomentSums {
 inline bool MseAboutWithinEpsilon(const MomentSums& m, const Eigen::Vector3d& n,
                                   const DetectionParams& params) {
   const double k = m.k;
-  if (!(k > 0)) return true;  // no points: MSE 0
-  const double nqn = m.xx * n.x() * n.x() + m.yy * n.y() * n.y() + m.zz * n.z() * n.z() +
-                     2.0 * (m.xy * n.x() * n.y() + m.xz * n.x() * n.z() + m.yz * n.y() * n.z());
-  const double ns = m.sx * n.x() + m.sy * n.y() + m.sz * n.z();
+  if (!(k > 0)) return false;  // no points: the plain test's MSE is undefined (NaN), it rejects
+  double nqn, ns;
+  m.AlongNormal(n, nqn, ns);
   const double k2_mse = std::max(0.0, k * nqn - ns * ns);  // K^2 MseAbout(n)
   const double k2 = k * k;
   if (params.model != ThresholdModel::kDepth) return k2_mse < params.epsilon * k2;
-  const double sigmas =
-      params.epsilon_count_sigmas > 0.0
-          ? params.epsilon_sigmas + params.epsilon_count_sigmas * std::sqrt(2.0 / std::max(k, 1.0))
-          : params.epsilon_sigmas;
+  const double sigmas = params.EpsilonSigmas(k);
   const double k2_expected = std::max(0.0, k * m.NoiseAlong(n));  // K^2 ExpectedMse(n)
   const double s2 = sigmas * sigmas;
   const double k2_d = k2_mse - params.epsilon * k2 - s2 * k2_expected;
