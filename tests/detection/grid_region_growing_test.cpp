@@ -55,6 +55,57 @@ TEST(GridRegionGrowing, NoiseFreeRoomDepthThresholds) {
   test::ExpectPlanesFound(frame, gbrg.Detect(frame.cloud), 2000, 0.5, 0.005, "grid3 depth");
 }
 
+TEST(GridRegionGrowing, FastVariantNoiseFreeAndKinectNoise) {
+  // grid-fast under both threshold models, noise-free and with Kinect noise (1-4 m).
+  for (const bool depth : {true, false}) {
+    DetectionParams params = depth ? DetectionParams() : PaperConstants();
+    GridParams grid;
+    UseFastVariant(params, grid);
+    const GridRegionGrowing fast(params, grid);
+    const std::string model = depth ? " depth" : " constant";
+    const auto clean = test::RenderScene(test::RoomPlanes());
+    test::ExpectPlanesFound(clean, fast.Detect(clean.cloud), 2000, 0.5, 0.005,
+                            "grid-fast noise-free" + model);
+    if (!depth) continue;  // the paper's constants are for noise-free data
+    for (unsigned seed : {11u, 12u, 13u}) {
+      const auto noisy = test::RenderScene(test::RoomPlanes(), 1.425e-3, seed);
+      const Segmentation seg = fast.Detect(noisy.cloud);
+      const std::string what = "grid-fast noisy seed " + std::to_string(seed);
+      test::ExpectPlanesFound(noisy, seg, 2000, 2.0, 0.02, what);
+      const auto assigned =
+          std::count_if(seg.labels.begin(), seg.labels.end(), [](int l) { return l >= 1; });
+      EXPECT_GT(assigned, 0.8 * noisy.cloud.CountValid()) << what;
+    }
+  }
+}
+
+TEST(GridRegionGrowing, GridLevelRefinementTakesBackTheWallsGridsAtTheCorner) {
+  // Noise-free room, 5x5 grids, depth model, no pixel-level refinement or ray fit: far away a
+  // grid's normal is noise and gets no angle test, so the grazing right wall grows into the back
+  // wall's grids along their corner (8 % of its points, 2.5 cm of offset). The grid-level
+  // refinement gives them back.
+  const auto frame = test::RenderScene(test::RoomPlanes());
+  DetectionParams params;
+  params.refine_boundary = false;
+  params.ray_fit = false;
+  GridParams grid;
+  grid.cell_size = 5;
+  const Plane* right[2] = {nullptr, nullptr};
+  Segmentation seg[2];
+  for (int refine = 0; refine < 2; ++refine) {
+    grid.refine_grids = refine == 1;
+    seg[refine] = GridRegionGrowing(params, grid).Detect(frame.cloud);
+    for (const auto& p : seg[refine].planes) {
+      const bool right_wall = p.normal.dot(frame.planes[3].normal) > std::cos(5 * M_PI / 180);
+      if (right_wall && right[refine] == nullptr) right[refine] = &p;  // the largest such plane
+    }
+    ASSERT_NE(right[refine], nullptr);
+  }
+  EXPECT_GT(std::abs(right[0]->d - frame.planes[3].d), 0.01);  // the corner's bias without it
+  EXPECT_LT(std::abs(right[1]->d - frame.planes[3].d), 0.002);
+  EXPECT_LT(right[1]->point_count, right[0]->point_count);
+}
+
 TEST(GridRegionGrowing, KinectNoiseRoomDepthThresholds) {
   // Up to 6x6 grids: the back wall 3.8 m away is noisier (2 cm) than a 6x6 grid is wide there, so
   // these grids' normals are noise (see the classification) and the wall is found all the same.
@@ -101,39 +152,45 @@ TEST(GridRegionGrowing, ClassifiesShapes) {
 }
 
 TEST(GridRegionGrowing, DeterministicAndIndependentOfVisitOrder) {
-  // 639 x 480 is a whole number of 3x3 grids, so turning the image by 180 degrees (reversing the
-  // pixel order, same 3D points) keeps the same grids but reverses every visiting order and the
-  // index tie-breaks. The planes found must be the same.
-  const auto frame = test::RenderScene(test::RoomPlanes(), 1.425e-3, 3, 639, 480);
-  const GridRegionGrowing gbrg{DetectionParams(), GridParams()};
-  const Segmentation a = gbrg.Detect(frame.cloud);
-  const Segmentation a2 = gbrg.Detect(frame.cloud);
-  ASSERT_EQ(a.planes.size(), a2.planes.size());
-  EXPECT_EQ(a.labels, a2.labels);
-  for (std::size_t i = 0; i < a.planes.size(); ++i) {
-    EXPECT_EQ(a.planes[i].normal, a2.planes[i].normal);
-    EXPECT_EQ(a.planes[i].d, a2.planes[i].d);
-  }
-  datasets::OrganizedCloud turned = frame.cloud;
-  std::reverse(turned.points.begin(), turned.points.end());
-  const Segmentation b = gbrg.Detect(turned);
-  // Compare the large planes (>= 2000 px) one to one.
-  auto large = [](const Segmentation& s) {
-    std::vector<Plane> out;
-    for (const auto& p : s.planes)
-      if (p.point_count >= 2000) out.push_back(p);
-    return out;
-  };
-  const auto la = large(a), lb = large(b);
-  ASSERT_EQ(la.size(), lb.size());
-  for (const auto& p : la) {
-    bool found = false;
-    for (const auto& q : lb) {
-      if (p.normal.dot(q.normal) > std::cos(0.2 * M_PI / 180) && std::abs(p.d - q.d) < 0.003 &&
-          std::abs(p.point_count - q.point_count) < 0.03 * p.point_count)
-        found = true;
+  // 639 x 480 is a whole number of 3x3 grids (640 x 480 of grid-fast's 5x5 grids), so turning the
+  // image by 180 degrees (reversing the pixel order, same 3D points) keeps the same grids but
+  // reverses every visiting order and the index tie-breaks. The planes found must be the same.
+  for (const bool fast : {false, true}) {
+    DetectionParams params;
+    GridParams grid;
+    if (fast) UseFastVariant(params, grid);
+    const std::string what = fast ? "grid-fast" : "grid3";
+    const auto frame = test::RenderScene(test::RoomPlanes(), 1.425e-3, 3, fast ? 640 : 639, 480);
+    const GridRegionGrowing gbrg{params, grid};
+    const Segmentation a = gbrg.Detect(frame.cloud);
+    const Segmentation a2 = gbrg.Detect(frame.cloud);
+    ASSERT_EQ(a.planes.size(), a2.planes.size()) << what;
+    EXPECT_EQ(a.labels, a2.labels) << what;
+    for (std::size_t i = 0; i < a.planes.size(); ++i) {
+      EXPECT_EQ(a.planes[i].normal, a2.planes[i].normal) << what;
+      EXPECT_EQ(a.planes[i].d, a2.planes[i].d) << what;
     }
-    EXPECT_TRUE(found) << "plane n=" << p.normal.transpose() << " d=" << p.d;
+    datasets::OrganizedCloud turned = frame.cloud;
+    std::reverse(turned.points.begin(), turned.points.end());
+    const Segmentation b = gbrg.Detect(turned);
+    // Compare the large planes (>= 2000 px) one to one.
+    auto large = [](const Segmentation& s) {
+      std::vector<Plane> out;
+      for (const auto& p : s.planes)
+        if (p.point_count >= 2000) out.push_back(p);
+      return out;
+    };
+    const auto la = large(a), lb = large(b);
+    ASSERT_EQ(la.size(), lb.size()) << what;
+    for (const auto& p : la) {
+      bool found = false;
+      for (const auto& q : lb) {
+        if (p.normal.dot(q.normal) > std::cos(0.2 * M_PI / 180) && std::abs(p.d - q.d) < 0.003 &&
+            std::abs(p.point_count - q.point_count) < 0.03 * p.point_count)
+          found = true;
+      }
+      EXPECT_TRUE(found) << what << ": plane n=" << p.normal.transpose() << " d=" << p.d;
+    }
   }
 }
 

@@ -87,6 +87,10 @@ TEST(RealData, TumStructureNotextureFarFirstFrame) {
   ASSERT_EQ(cloud.width, 640);
   CheckTumScene(GridRegionGrowing(DetectionParams(), GridParams()).Detect(cloud), cloud, "grid3");
   CheckTumScene(PointRegionGrowing(DetectionParams(), PointParams()).Detect(cloud), cloud, "point");
+  DetectionParams fast_params;
+  GridParams fast_grid;
+  UseFastVariant(fast_params, fast_grid);
+  CheckTumScene(GridRegionGrowing(fast_params, fast_grid).Detect(cloud), cloud, "grid-fast");
 }
 
 /// Laser scan of a house (3DTK convention: y up, left-handed), centimetres -> metres. The
@@ -132,6 +136,9 @@ TEST(RealData, LaserScanHouse) {
   params.sigma_z2 = 0.0;
   CheckLaserScene(GridRegionGrowing(params, GridParams()).Detect(cloud), "grid3");
   CheckLaserScene(PointRegionGrowing(params, PointParams()).Detect(cloud), "point");
+  GridParams fast_grid;
+  UseFastVariant(params, fast_grid);
+  CheckLaserScene(GridRegionGrowing(params, fast_grid).Detect(cloud), "grid-fast");
 }
 
 }  // namespace

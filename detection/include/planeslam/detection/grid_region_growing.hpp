@@ -45,10 +45,19 @@ struct GridParams {
   double alpha = 0.006;    ///< linear when l2 <= alpha l3 (paper value)
   double beta = 0.4;       ///< planar when l1 <= beta l2 (paper value)
   int refit_interval = 0;  ///< 1 = refit the plane on every join (paper); N = every N; 0 = adaptive
+  /// Before any pixel-level refinement: each grid at a plane's border goes whole to the adjacent
+  /// plane that fits its points best within tolerance (the grid-level stand-in for
+  /// DetectionParams::refine_boundary in the fast variant).
+  bool refine_grids = false;
 
   int EffectiveMu() const { return mu > 0 ? mu : cell_size * cell_size - cell_size + 1; }
   std::vector<std::string> Validate() const;
 };
+
+/// Turns parameters into those of GBRG's fast variant (method `grid-fast`): 5x5 grids, the
+/// grid-level refinement in place of the pixel-level one, and final planes fitted to their points
+/// (no ray fit). Merging stays as set.
+void UseFastVariant(DetectionParams& params, GridParams& grid);
 
 class GridRegionGrowing : public PlaneDetector {
  public:
