@@ -63,10 +63,11 @@ struct Workspace {
   std::vector<MomentSums> regions;
   std::vector<FastFit> fits;
   std::vector<std::int32_t> labels;
-  std::vector<std::int32_t> row_labels;         ///< one row of grid labels expanded to pixels
-  std::vector<RaySums> grid_rays;               ///< ray sums of each grid's pixels (ray fit)
-  std::vector<RaySums> rays;                    ///< ray sums of each region
-  std::vector<int> edge_grids;                  ///< grids with a neighbour outside their region
+  std::vector<std::int32_t> row_labels;  ///< one row of grid labels expanded to pixels
+  std::vector<RaySums> grid_rays;        ///< ray sums of each grid's pixels (ray fit)
+  std::vector<RaySums> rays;             ///< ray sums of each region
+  std::vector<int> edge_grids;           ///< grids with a neighbour outside their region
+  std::vector<std::int32_t> grid_ids;    ///< each grid's plane id (pixel labels = their grid's)
   std::vector<std::pair<int, int>> grid_moves;  ///< (grid, region) of the grid-level refinement
 };
 
@@ -550,36 +551,43 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     return !ws.grid_moves.empty();
   };
   if (grid_.refine_grids && num_regions > 0 && refine_edge_grids()) find_edge_grids();
-  // Each band of k rows is written once: a row of grid labels expanded to pixels, copied to every
-  // row of the band, then the invalid pixels of partly valid grids in a plane set to -1. The copy
-  // is a plain loop: with memcpy (rep movsb on the Zen 3 development machine) the stages that read
-  // the labels next ran 0.2 ms slower.
-  ws.labels.resize(static_cast<std::size_t>(width) * height);
-  ws.row_labels.resize(width);
-  for (int cy = 0; cy < cells_y; ++cy) {
-    const int y0 = cy * k, y1 = std::min(height, y0 + k);
-    const std::size_t cell_row = static_cast<std::size_t>(cy) * cells_x;
-    const std::int32_t* creg = ws.cell_region.data() + cell_row;
-    const std::int32_t* ccount = ws.counts.data() + cell_row;
-    for (int cx = 0; cx < cells_x; ++cx) {
-      std::fill_n(ws.row_labels.data() + cx * k, std::min(k, width - cx * k), creg[cx]);
-    }
-    for (int y = y0; y < y1; ++y) {
-      std::int32_t* dst = ws.labels.data() + static_cast<std::size_t>(y) * width;
-      const std::int32_t* src = ws.row_labels.data();
-      for (int x = 0; x < width; ++x) dst[x] = src[x];
-    }
-    for (int cx = 0; cx < cells_x; ++cx) {
-      const int x0 = cx * k, x1 = std::min(width, x0 + k);
-      if (creg[cx] < 0 || ccount[cx] == (x1 - x0) * (y1 - y0)) continue;
+  // Pixel labels from a value per grid. Each band of k rows is written once: a row of grid values
+  // expanded to pixels, copied to every row of the band, then the invalid pixels of partly valid
+  // grids with a value >= 0 set to -1. The copy is a plain loop: with memcpy (rep movsb on the
+  // Zen 3 development machine) the stages that read the labels next ran 0.2 ms slower.
+  auto expand_to_pixels = [&](const std::int32_t* grid_values, std::vector<std::int32_t>& pixels) {
+    pixels.resize(static_cast<std::size_t>(width) * height);
+    ws.row_labels.resize(width);
+    for (int cy = 0; cy < cells_y; ++cy) {
+      const int y0 = cy * k, y1 = std::min(height, y0 + k);
+      const std::size_t cell_row = static_cast<std::size_t>(cy) * cells_x;
+      const std::int32_t* values = grid_values + cell_row;
+      const std::int32_t* ccount = ws.counts.data() + cell_row;
+      for (int cx = 0; cx < cells_x; ++cx) {
+        std::fill_n(ws.row_labels.data() + cx * k, std::min(k, width - cx * k), values[cx]);
+      }
       for (int y = y0; y < y1; ++y) {
-        const std::size_t row = static_cast<std::size_t>(y) * width;
-        for (int x = x0; x < x1; ++x) {
-          if (!std::isfinite(pts[row + x].z())) ws.labels[row + x] = -1;
+        std::int32_t* dst = pixels.data() + static_cast<std::size_t>(y) * width;
+        const std::int32_t* src = ws.row_labels.data();
+        for (int x = 0; x < width; ++x) dst[x] = src[x];
+      }
+      for (int cx = 0; cx < cells_x; ++cx) {
+        const int x0 = cx * k, x1 = std::min(width, x0 + k);
+        if (values[cx] < 0 || ccount[cx] == (x1 - x0) * (y1 - y0)) continue;
+        for (int y = y0; y < y1; ++y) {
+          const std::size_t row = static_cast<std::size_t>(y) * width;
+          for (int x = x0; x < x1; ++x) {
+            if (!std::isfinite(pts[row + x].z())) pixels[row + x] = -1;
+          }
         }
       }
     }
-  }
+  };
+  // Without the pixel-level refinement and the ray fit every valid pixel keeps its grid's label:
+  // region borders, merging and plane ids are then worked out on the grid image (k^2 times fewer
+  // labels), and the pixel labels written once, from the plane ids, at the end.
+  const bool grid_labels = !params_.refine_boundary && !params_.ray_fit;
+  if (!grid_labels) expand_to_pixels(ws.cell_region.data(), ws.labels);
   // Region ray sums from their grids' (the refinement below corrects them pixel by pixel).
   ws.rays.assign(params_.ray_fit ? num_regions : 0, RaySums());
   if (params_.ray_fit) {
@@ -736,20 +744,30 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
 
   // ---- 5. Merge adjacent regions that are one surface; final planes from all their pixels.
   const auto t4 = Clock::now();
+  std::vector<std::int32_t>& region_image = grid_labels ? ws.cell_region : ws.labels;
   internal::RegionBorders borders;
   if (params_.merge_regions || params_.ray_fit) {
-    internal::RegionBorderScan scan(ws.labels, width, height);
+    internal::RegionBorderScan scan(region_image, grid_labels ? cells_x : width,
+                                    grid_labels ? cells_y : height);
     for (const int c : ws.edge_grids) {
       const auto [cx, cy] = grid_xy(c);
-      scan.Scan(cx * k, cy * k, std::min(width, (cx + 1) * k), std::min(height, (cy + 1) * k));
+      if (grid_labels) {
+        scan.Scan(cx, cy, cx + 1, cy + 1);
+      } else {
+        scan.Scan(cx * k, cy * k, std::min(width, (cx + 1) * k), std::min(height, (cy + 1) * k));
+      }
     }
     borders = scan.Finish();
   }
   if (params_.merge_regions) {
-    internal::MergeCoplanarRegions(ws.labels, borders.pairs, ws.regions, ws.rays, params_);
+    internal::MergeCoplanarRegions(region_image, borders.pairs, ws.regions, ws.rays, params_);
   }
-  internal::FinalizeSegmentation(cloud, ws.labels, ws.regions, ws.rays, borders.pixels, params_,
+  internal::FinalizeSegmentation(cloud, region_image, ws.regions, ws.rays, borders.pixels, params_,
                                  out);
+  if (grid_labels) {  // out.labels holds each grid's plane id: expand it to the pixels
+    ws.grid_ids.swap(out.labels);
+    expand_to_pixels(ws.grid_ids.data(), out.labels);
+  }
   out.cell_classes = ws.classes;
   const auto t5 = Clock::now();
   out.timings_ms = {{"moments", Ms(t0, t1)},
