@@ -11,7 +11,7 @@ void VisitDetection(FieldVisitor& v, DetectionSection& c) {
   auto& p = c.params;
   v.Field("method", c.method,
           "detector: grid (GBRG, grid.cell_size), grid3/4/5, grid-fast (5x5 grids, grid-level "
-          "refinement, no ray fit), grid-paper (refit per join, no refinement/merge/ray fit), "
+          "refinement only), grid-paper (refit per join, no refinement/merge/ray fit), "
           "point (PBRG), point-exact (refit per point), point-paper (no merge/ray fit)",
           DetectorMethods());
   v.Field("threshold_model", c.threshold_model,
@@ -83,8 +83,9 @@ void VisitGrid(FieldVisitor& v, detection::GridParams& c) {
           "N/64 joins of an N-grid region, exact MSE test)",
           0, 1000000);
   v.Field("refine_grids", c.refine_grids,
-          "each grid at a plane's border goes whole to the adjacent plane that fits it best "
-          "(grid-level refinement, before detection.refine_boundary's pixel-level one)");
+          "each grid at a plane's border goes whole to the adjacent plane that fits it better; "
+          "without detection.refine_boundary planes are then fitted to their grids away from "
+          "creases");
 }
 
 std::vector<std::string> ValidateGrid(const detection::GridParams& c) { return c.Validate(); }

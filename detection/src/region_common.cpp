@@ -347,13 +347,26 @@ void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
                           std::vector<std::int32_t>& region_labels,
                           std::vector<MomentSums>& regions, std::vector<RaySums>& rays,
                           const std::vector<std::size_t>& border_pixels,
-                          const DetectionParams& params, Segmentation& out) {
+                          const DetectionParams& params, Segmentation& out,
+                          const std::vector<MomentSums>* fit_sums,
+                          const std::vector<RaySums>* fit_rays) {
   out.width = cloud.width;
   out.height = cloud.height;
   const int n = static_cast<int>(regions.size());
-  const std::vector<RayPlane> ray_planes =
-      params.ray_fit ? FitAlongRays(cloud, region_labels, regions, rays, border_pixels, params)
-                     : std::vector<RayPlane>();
+  PLANESLAM_CHECK(
+      fit_sums == nullptr ||
+          (fit_sums->size() == regions.size() &&
+           (!params.ray_fit || (fit_rays != nullptr && fit_rays->size() == regions.size()))),
+      "finalize: one fit subset per region expected");
+  std::vector<RayPlane> ray_planes;
+  if (params.ray_fit && fit_sums != nullptr) {
+    ray_planes.resize(regions.size());
+    for (std::size_t r = 0; r < regions.size(); ++r) {
+      ray_planes[r] = SolveRegion((*fit_rays)[r], (*fit_sums)[r]);
+    }
+  } else if (params.ray_fit) {
+    ray_planes = FitAlongRays(cloud, region_labels, regions, rays, border_pixels, params);
+  }
   std::vector<int> order;
   order.reserve(n);
   for (int i = 0; i < n; ++i) {
@@ -371,6 +384,11 @@ void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
     p.id = static_cast<int>(out.planes.size()) + 1;
     p.normal = f.normal;
     p.d = f.d;
+    if (fit_sums != nullptr && (*fit_sums)[static_cast<std::size_t>(r)].k >= 3) {
+      const FastFit subset = FitSums((*fit_sums)[static_cast<std::size_t>(r)]);
+      p.normal = subset.normal;
+      p.d = subset.d;
+    }
     if (params.ray_fit && ray_planes[static_cast<std::size_t>(r)].ok) {
       p.normal = ray_planes[static_cast<std::size_t>(r)].normal;
       p.d = ray_planes[static_cast<std::size_t>(r)].d;

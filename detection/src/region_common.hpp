@@ -66,11 +66,17 @@ void MergeCoplanarRegions(std::vector<std::int32_t>& labels,
 /// fit of its ray sums `rays` (the eigen fit where that is degenerate).
 /// The ray fit also lets the pixels of `border_pixels` change region at a crease, updating
 /// `region_labels`, `regions` and `rays` (see FitAlongRays in the source).
+/// With `fit_sums` (a grower whose labels are coarser than pixels, GBRG without pixel-level
+/// refinement) a region's plane is fitted to the subset of its points summed there instead, along
+/// the rays from `fit_rays` with params.ray_fit, and no pixel changes region at a crease;
+/// `region_labels` may then be an image of grids, and `border_pixels` is not used.
 void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
                           std::vector<std::int32_t>& region_labels,
                           std::vector<MomentSums>& regions, std::vector<RaySums>& rays,
                           const std::vector<std::size_t>& border_pixels,
-                          const DetectionParams& params, Segmentation& out);
+                          const DetectionParams& params, Segmentation& out,
+                          const std::vector<MomentSums>* fit_sums = nullptr,
+                          const std::vector<RaySums>* fit_rays = nullptr);
 
 /// The whole of what follows growth for a grower that has only a region-index image (PBRG):
 /// ScanLabelImage, then MergeCoplanarRegions (params.merge_regions), then FinalizeSegmentation.

@@ -55,23 +55,26 @@ TEST(GridRegionGrowing, NoiseFreeRoomDepthThresholds) {
   test::ExpectPlanesFound(frame, gbrg.Detect(frame.cloud), 2000, 0.5, 0.005, "grid3 depth");
 }
 
-TEST(GridRegionGrowing, FastVariantNoiseFreeAndKinectNoise) {
-  // grid-fast under both threshold models, noise-free and with Kinect noise (1-4 m).
-  for (const bool depth : {true, false}) {
-    DetectionParams params = depth ? DetectionParams() : PaperConstants();
-    GridParams grid;
-    UseFastVariant(params, grid);
-    const GridRegionGrowing fast(params, grid);
-    const std::string model = depth ? " depth" : " constant";
-    const auto clean = test::RenderScene(test::RoomPlanes());
-    test::ExpectPlanesFound(clean, fast.Detect(clean.cloud), 2000, 0.5, 0.005,
-                            "grid-fast noise-free" + model);
-    if (!depth) continue;  // the paper's constants are for noise-free data
-    for (unsigned seed : {11u, 12u, 13u}) {
-      const auto noisy = test::RenderScene(test::RoomPlanes(), 1.425e-3, seed);
+TEST(GridRegionGrowing, FastVariantNoiseFreeAndKinectNoiseWhereverTheGridsFall) {
+  // grid-fast noise-free under both threshold models and with Kinect noise (1-4 m), on the room
+  // rendered 630 to 652 pixels wide: the image centre, and so where the 5x5 grids cut the
+  // corners, moves by a pixel from one width to the next. (Fitted to all its grids, the grazing
+  // right wall came out 5-16 mm off on the noise-free frames 638 and 648 px wide and 2.6 cm off on
+  // a noisy one; fitted without the ray fit, 2.0-3.4 cm off on three noisy ones.)
+  for (int width = 630; width <= 652; width += 2) {
+    for (const bool depth : {true, false}) {
+      DetectionParams params = depth ? DetectionParams() : PaperConstants();
+      GridParams grid;
+      UseFastVariant(params, grid);
+      const GridRegionGrowing fast(params, grid);
+      const std::string what = "grid-fast width " + std::to_string(width);
+      const auto clean = test::RenderScene(test::RoomPlanes(), 0.0, 1, width, 480);
+      test::ExpectPlanesFound(clean, fast.Detect(clean.cloud), 2000, 0.5, 0.005,
+                              what + (depth ? " noise-free depth" : " noise-free constant"));
+      if (!depth) continue;  // the paper's constants are for noise-free data
+      const auto noisy = test::RenderScene(test::RoomPlanes(), 1.425e-3, width, width, 480);
       const Segmentation seg = fast.Detect(noisy.cloud);
-      const std::string what = "grid-fast noisy seed " + std::to_string(seed);
-      test::ExpectPlanesFound(noisy, seg, 2000, 2.0, 0.02, what);
+      test::ExpectPlanesFound(noisy, seg, 2000, 2.0, 0.02, what + " noisy");
       const auto assigned =
           std::count_if(seg.labels.begin(), seg.labels.end(), [](int l) { return l >= 1; });
       EXPECT_GT(assigned, 0.8 * noisy.cloud.CountValid()) << what;

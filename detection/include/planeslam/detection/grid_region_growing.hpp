@@ -46,8 +46,8 @@ struct GridParams {
   double beta = 0.4;       ///< planar when l1 <= beta l2 (paper value)
   int refit_interval = 0;  ///< 1 = refit the plane on every join (paper); N = every N; 0 = adaptive
   /// Before any pixel-level refinement: each grid at a plane's border goes whole to the adjacent
-  /// plane that fits its points best within tolerance (the grid-level stand-in for
-  /// DetectionParams::refine_boundary in the fast variant).
+  /// plane that fits it better within tolerance; without the pixel-level refinement, each plane
+  /// is then fitted to its grids away from its creases with other planes.
   bool refine_grids = false;
 
   int EffectiveMu() const { return mu > 0 ? mu : cell_size * cell_size - cell_size + 1; }
@@ -55,8 +55,9 @@ struct GridParams {
 };
 
 /// Turns parameters into those of GBRG's fast variant (method `grid-fast`): 5x5 grids, the
-/// grid-level refinement in place of the pixel-level one, and final planes fitted to their points
-/// (no ray fit). Merging stays as set.
+/// grid-level refinement in place of the pixel-level one, so that every pixel keeps its grid's
+/// label and each plane is fitted (along the rays, as set) to its grids away from its creases.
+/// Merging and the ray fit stay as set.
 void UseFastVariant(DetectionParams& params, GridParams& grid);
 
 class GridRegionGrowing : public PlaneDetector {
