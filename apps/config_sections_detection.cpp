@@ -84,8 +84,7 @@ void VisitGrid(FieldVisitor& v, detection::GridParams& c) {
           0, 1000000);
   v.Field("refine_grids", c.refine_grids,
           "each grid at a plane's border goes whole to the adjacent plane that fits it better; "
-          "without detection.refine_boundary planes are then fitted to their grids away from "
-          "creases");
+          "without detection.refine_boundary planes are then fitted to their interior grids");
 }
 
 std::vector<std::string> ValidateGrid(const detection::GridParams& c) { return c.Validate(); }

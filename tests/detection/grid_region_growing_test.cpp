@@ -60,7 +60,7 @@ TEST(GridRegionGrowing, FastVariantNoiseFreeAndKinectNoiseWhereverTheGridsFall) 
   // rendered 630 to 652 pixels wide: the image centre, and so where the 5x5 grids cut the
   // corners, moves by a pixel from one width to the next. (Fitted to all its grids, the grazing
   // right wall came out 5-16 mm off on the noise-free frames 638 and 648 px wide and 2.6 cm off on
-  // a noisy one; fitted without the ray fit, 2.0-3.4 cm off on three noisy ones.)
+  // a noisy one; fitted to them without the ray fit, 2.0-3.4 cm off on three noisy ones.)
   for (int width = 630; width <= 652; width += 2) {
     for (const bool depth : {true, false}) {
       DetectionParams params = depth ? DetectionParams() : PaperConstants();

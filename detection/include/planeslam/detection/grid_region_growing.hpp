@@ -47,7 +47,7 @@ struct GridParams {
   int refit_interval = 0;  ///< 1 = refit the plane on every join (paper); N = every N; 0 = adaptive
   /// Before any pixel-level refinement: each grid at a plane's border goes whole to the adjacent
   /// plane that fits it better within tolerance; without the pixel-level refinement, each plane
-  /// is then fitted to its grids away from its creases with other planes.
+  /// is then fitted to its interior grids (all 8 neighbours in the plane).
   bool refine_grids = false;
 
   int EffectiveMu() const { return mu > 0 ? mu : cell_size * cell_size - cell_size + 1; }
@@ -56,7 +56,7 @@ struct GridParams {
 
 /// Turns parameters into those of GBRG's fast variant (method `grid-fast`): 5x5 grids, the
 /// grid-level refinement in place of the pixel-level one, so that every pixel keeps its grid's
-/// label and each plane is fitted (along the rays, as set) to its grids away from its creases.
+/// label and each plane is fitted (along the rays, as set) to its interior grids.
 /// Merging and the ray fit stay as set.
 void UseFastVariant(DetectionParams& params, GridParams& grid);
 
