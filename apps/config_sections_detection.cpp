@@ -45,7 +45,8 @@ void VisitDetection(FieldVisitor& v, DetectionSection& c) {
           "depth model: a grid whose rms residual is within this many sigma_n is planar [1]", 0.0,
           100.0);
   v.Field("refine_boundary", p.refine_boundary,
-          "GBRG: re-assign the pixels of border grids to the best-fitting adjacent plane");
+          "GBRG: re-assign the pixels of border grids to the best-fitting adjacent plane (off: "
+          "every pixel keeps its grid's label, and the ray fit moves no pixel at a crease)");
   v.Field(
       "refine_sigmas", p.refine_sigmas,
       "refinement: a pixel joins when |n.p - d| < this many sigma_n (constant model: gamma) [1]",
