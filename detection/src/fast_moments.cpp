@@ -526,8 +526,8 @@ __attribute__((target("avx2,fma"))) void SumFourGridsAvx2(const Eigen::Vector3f*
 #ifdef PLANESLAM_X86
 namespace {
 __attribute__((target("avx2"))) std::size_t MapLabelsAvx2(const std::int32_t* shifted_table,
-                                                          const std::int32_t* in, std::int32_t* out,
-                                                          std::size_t n) {
+                                                           const std::int32_t* in,
+                                                           std::int32_t* out, std::size_t n) {
   const __m256i one = _mm256_set1_epi32(1);
   std::size_t i = 0;
   for (; i + 8 <= n; i += 8) {

@@ -86,7 +86,7 @@ TEST(GridRegionGrowing, GridLevelRefinementTakesBackTheWallsGridsAtTheCorner) {
   // Noise-free room, 5x5 grids, depth model, no pixel-level refinement or ray fit: far away a
   // grid's normal is noise and gets no angle test, so the grazing right wall grows into the back
   // wall's grids along their corner (8 % of its points, 2.5 cm of offset). The grid-level
-  // refinement gives them back.
+  // refinement gives them back (and then fits the wall to its interior grids).
   const auto frame = test::RenderScene(test::RoomPlanes());
   DetectionParams params;
   params.refine_boundary = false;
