@@ -771,10 +771,11 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     // is no plane. With 5x5 grids, fitted to all its grids, the synthetic room's narrow grazing
     // right wall came out up to 16 mm off (noise-free, depending on where the corner falls in the
     // grids) and 2.6 cm with Kinect noise, and a 3200-pixel plane of the simulated room 2.6 deg
-    // off. A plane left with under a quarter of its points that way keeps them all.
-    ws.fit_sums = ws.regions;
-    ws.fit_rays = ws.rays;
+    // off. A plane left with under a quarter of its points that way keeps them all. Without the
+    // grid-level refinement each plane is fitted to all its grids (no copy).
     if (grid_.refine_grids) {
+      ws.fit_sums = ws.regions;
+      ws.fit_rays = ws.rays;
       for (const int c : ws.edge_grids) {  // every grid of a plane that is not interior
         const int r = ws.cell_region[c];
         if (r < 0) continue;
@@ -788,9 +789,11 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       }
     }
   }
-  internal::FinalizeSegmentation(cloud, region_image, ws.regions, ws.rays, borders.pixels, params_,
-                                 out, grid_labels ? &ws.fit_sums : nullptr,
-                                 grid_labels ? &ws.fit_rays : nullptr);
+  const bool interior_fit = grid_labels && grid_.refine_grids;
+  internal::FinalizeSegmentation(
+      cloud, region_image, ws.regions, ws.rays, borders.pixels, params_, out,
+      grid_labels ? (interior_fit ? &ws.fit_sums : &ws.regions) : nullptr,
+      grid_labels ? (interior_fit ? &ws.fit_rays : &ws.rays) : nullptr);
   if (grid_labels) {  // out.labels holds each grid's plane id: expand it to the pixels
     ws.grid_ids.swap(out.labels);
     expand_to_pixels(ws.grid_ids.data(), out.labels);

@@ -384,14 +384,14 @@ void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
     p.id = static_cast<int>(out.planes.size()) + 1;
     p.normal = f.normal;
     p.d = f.d;
-    if (fit_sums != nullptr && (*fit_sums)[static_cast<std::size_t>(r)].k >= 3) {
-      const FastFit subset = FitSums((*fit_sums)[static_cast<std::size_t>(r)]);
-      p.normal = subset.normal;
-      p.d = subset.d;
-    }
     if (params.ray_fit && ray_planes[static_cast<std::size_t>(r)].ok) {
       p.normal = ray_planes[static_cast<std::size_t>(r)].normal;
       p.d = ray_planes[static_cast<std::size_t>(r)].d;
+    } else if (fit_sums != nullptr && fit_sums != &regions &&
+               (*fit_sums)[static_cast<std::size_t>(r)].k >= 3) {
+      const FastFit subset = FitSums((*fit_sums)[static_cast<std::size_t>(r)]);
+      p.normal = subset.normal;
+      p.d = subset.d;
     }
     p.centroid = f.centroid;
     p.point_count = static_cast<std::int64_t>(std::llround(s.k));

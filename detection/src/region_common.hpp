@@ -69,7 +69,8 @@ void MergeCoplanarRegions(std::vector<std::int32_t>& labels,
 /// With `fit_sums` (a grower whose labels are coarser than pixels, GBRG without pixel-level
 /// refinement) a region's plane is fitted to the subset of its points summed there instead, along
 /// the rays from `fit_rays` with params.ray_fit, and no pixel changes region at a crease;
-/// `region_labels` may then be an image of grids, and `border_pixels` is not used.
+/// `region_labels` may then be an image of grids, and `border_pixels` is not used. `fit_sums` may
+/// be `&regions` (and `fit_rays` `&rays`): every point is fitted, with no second eigen fit.
 void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
                           std::vector<std::int32_t>& region_labels,
                           std::vector<MomentSums>& regions, std::vector<RaySums>& rays,
