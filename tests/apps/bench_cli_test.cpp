@@ -4,10 +4,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <set>
+#include <sstream>
 #include <string>
 
 #include "bench_common.hpp"
@@ -67,6 +69,57 @@ TEST(BenchCli, DetectOneFrameWritesJsonPerMethod) {
   EXPECT_EQ(seen, std::set<std::string>(all.begin(), all.end()));
   // The summary names every method.
   for (const std::string& m : all) EXPECT_NE(out.find(m), std::string::npos) << out;
+}
+
+TEST(BenchCli, SpeedRatioOverVgaFramesLeavesTheLaserScanOut) {
+  // The detection speed targets are stated for 640 x 480 Kinect frames: the summary's last ratio
+  // is the median over those only, the first over every frame.
+  PLANESLAM_REQUIRE_DATA();
+  const std::vector<std::string> all = bench::AllMethods();
+  if (std::find(all.begin(), all.end(), "pcl_omps") == all.end()) {
+    GTEST_SKIP() << "built without the PCL baselines";
+  }
+  const fs::path kinect =
+      test::DataDir() / "tum_fr3_structure_notexture_far" / "depth" / "1341836537.655691.png";
+  const fs::path scan = test::DataDir() / "laser_scans" / "scan000.pcd";
+  if (!fs::exists(kinect) || !fs::exists(scan)) GTEST_SKIP() << kinect << " or " << scan;
+  const fs::path dir = test::ScratchDir();
+  const fs::path json = dir / "bench.json";
+  const test::CliResult r =
+      test::RunCli("bench detect '" + kinect.string() + "' '" + scan.string() +
+                       "' --methods grid-fast,pcl_omps --repeat 1 --json '" + json.string() +
+                       "' --quiet",
+                   dir);
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  std::ifstream in(json);
+  ASSERT_TRUE(in.good()) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(in);
+  double kinect_ratio = 0.0, scan_ratio = 0.0;
+  for (const auto& rec : j) {
+    if (rec["method"] != "grid-fast") continue;
+    const double ratio = rec["speedup_vs_pcl"];
+    if (rec["width"] == 640 && rec["height"] == 480) {
+      kinect_ratio = ratio;
+    } else {
+      scan_ratio = ratio;
+    }
+  }
+  ASSERT_GT(kinect_ratio, 0.0) << j.dump();
+  ASSERT_GT(scan_ratio, 0.0) << j.dump();
+  // The method's summary row: name, median ms, min ms, planes, assigned, then the three ratios.
+  EXPECT_NE(r.out.find("x PCL (640x480)"), std::string::npos) << r.out;
+  const std::size_t row = r.out.find("\ngrid-fast ");
+  ASSERT_NE(row, std::string::npos) << r.out;
+  std::istringstream fields(r.out.substr(row + 1, r.out.find('\n', row + 1) - row - 1));
+  std::string name, median, min, planes, assigned, all_frames, of_medians, vga;
+  fields >> name >> median >> min >> planes >> assigned >> all_frames >> of_medians >> vga;
+  auto format = [](double ratio) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%.1fx", ratio);
+    return std::string(text);
+  };
+  EXPECT_EQ(vga, format(kinect_ratio)) << r.out;
+  EXPECT_EQ(all_frames, format(0.5 * (kinect_ratio + scan_ratio))) << r.out;
 }
 
 TEST(BenchCli, UnknownMethodIsAOneLineError) {
