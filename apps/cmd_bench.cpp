@@ -233,7 +233,8 @@ class BenchCommand : public Command {
     for (const auto& r : records) {
       if (vga_only && !IsVgaFrame(r)) continue;
       auto it = pcl.find(r.frame);
-      if (it != pcl.end() && r.median_ms > 0.0) ratios[r.method].push_back(it->second / r.median_ms);
+      if (it != pcl.end() && r.median_ms > 0.0)
+        ratios[r.method].push_back(it->second / r.median_ms);
     }
     return ratios;
   }

@@ -10,7 +10,7 @@ namespace {
 void VisitDetection(FieldVisitor& v, DetectionSection& c) {
   auto& p = c.params;
   v.Field("method", c.method,
-          "detector: grid (GBRG, grid.cell_size), grid3/4/5, grid-fast (5x5 grids, grid-level "
+          "detector: grid (GBRG, grid.cell_size), grid3/4/5, grid-fast (6x6 grids, grid-level "
           "refinement only), grid-paper (refit per join, no refinement/merge/ray fit), "
           "point (PBRG), point-exact (refit per point), point-paper (no merge/ray fit)",
           DetectorMethods());
@@ -86,6 +86,11 @@ void VisitGrid(FieldVisitor& v, detection::GridParams& c) {
   v.Field("refine_grids", c.refine_grids,
           "each grid at a plane's border goes whole to the adjacent plane that fits it better; "
           "without detection.refine_boundary planes are then fitted to their interior grids");
+  v.Field("unresolved_spread", c.unresolved_spread,
+          "depth model: a growing region whose second-smallest spread is under this many times "
+          "its ray noise has no resolved normal yet and joins grids by the MSE test alone "
+          "(0 = off)",
+          0.0, 100.0);
 }
 
 std::vector<std::string> ValidateGrid(const detection::GridParams& c) { return c.Validate(); }

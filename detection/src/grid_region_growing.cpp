@@ -69,6 +69,8 @@ struct Workspace {
   std::vector<int> edge_grids;           ///< grids with a neighbour outside their region
   std::vector<MomentSums> fit_sums;      ///< what each plane is fitted to (whole grids)
   std::vector<RaySums> fit_rays;
+  std::vector<MomentSums> apart_sums;  ///< each plane without its grids next to another plane
+  std::vector<RaySums> apart_rays;
   std::vector<std::int32_t> grid_ids;  ///< each grid's plane id (pixel labels = their grid's)
   std::vector<std::pair<int, int>> grid_moves;  ///< (grid, region) of the grid-level refinement
 };
@@ -89,13 +91,16 @@ std::vector<std::string> GridParams::Validate() const {
   if (!(alpha > 0 && alpha < 1)) problems.push_back("alpha must be in (0, 1)");
   if (!(beta > 0 && beta < 1)) problems.push_back("beta must be in (0, 1)");
   if (refit_interval < 0) problems.push_back("refit_interval must be >= 0 (0 = adaptive)");
+  if (!(unresolved_spread >= 0 && unresolved_spread <= 100))
+    problems.push_back("unresolved_spread must be in [0, 100] (0 = off)");
   return problems;
 }
 
 void UseFastVariant(DetectionParams& params, GridParams& grid) {
-  grid.cell_size = 5;
+  grid.cell_size = 6;
   grid.mu = 0;  // the automatic k^2 - k + 1
   grid.refine_grids = true;
+  grid.unresolved_spread = 2.0;
   params.refine_boundary = false;
 }
 
@@ -305,7 +310,13 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     // The region normal's own uncertainty (depth model), kept with the fit: the tilt [rad] and
     // its cosine and sine, which widen every grid's angle tolerance.
     double tilt = 0.0, cos_tilt = 1.0, sin_tilt = 0.0;
+    // Whether the region's normal is resolved (grid.unresolved_spread): while its second-smallest
+    // spread l2 / K is within unresolved_spread times its ray noise, the depth noise and the
+    // region's narrow side are not told apart, and the fitted normal may lie in the surface
+    // (a strip of grids on a far wall fits the plane across the strip, not the wall).
+    bool normal_resolved = true;
     auto update_tilt = [&](double raw_tilt) {
+      normal_resolved = !(fit.l2 < grid_.unresolved_spread * region.IsotropicMse() * region.k);
       tilt = std::min(1.0, raw_tilt);
       if (tilt > 0.02) {  // below, the tests ignore the tilt (see there)
         SinCosFirstQuadrant(tilt, sin_tilt, cos_tilt);  // 0.02 < tilt <= 1
@@ -351,7 +362,11 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       const Eigen::Vector3d grid_normal = ci.n.cast<double>();
       const double cos_tol = ci.cos_tol, sin_tol = ci.sin_tol;
       const double off = std::abs(fit.normal.dot(diff));
-      if (depth_model) {
+      if (depth_model && !normal_resolved) {
+        // No angle or coplanarity test against an unresolved normal: the MSE test below (of the
+        // merged fit, whatever its normal) decides alone, and the region grows across its narrow
+        // side until the spread there exceeds the noise and the normal is the surface's.
+      } else if (depth_model) {
         // A young region's own normal is uncertain (tilt, 2 sigma): widen the angle test by it
         // and let the coplanarity test allow tilt x lateral distance, so that a seed with a
         // noisy normal corrects itself by growing instead of growing a strip along its error.
@@ -771,21 +786,36 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     // is no plane. With 5x5 grids, fitted to all its grids, the synthetic room's narrow grazing
     // right wall came out up to 16 mm off (noise-free, depending on where the corner falls in the
     // grids) and 2.6 cm with Kinect noise, and a 3200-pixel plane of the simulated room 2.6 deg
-    // off. A plane left with under a quarter of its points that way keeps them all. Without the
-    // grid-level refinement each plane is fitted to all its grids (no copy).
+    // off. A plane too narrow for that (under a quarter of its points left) is fitted to all its
+    // grids but those next to another plane (with 6x6 grids the same wall, two or three grids
+    // wide, came out 6-11 mm off, noise-free, fitted with the column of grids along its corner),
+    // and one too narrow for that as well keeps them all. Without the grid-level refinement each
+    // plane is fitted to all its grids (no copy).
     if (grid_.refine_grids) {
       ws.fit_sums = ws.regions;
       ws.fit_rays = ws.rays;
+      ws.apart_sums = ws.regions;
+      ws.apart_rays = ws.rays;
       for (const int c : ws.edge_grids) {  // every grid of a plane that is not interior
         const int r = ws.cell_region[c];
         if (r < 0) continue;
         ws.fit_sums[r].Subtract(ws.sums[c]);
         if (params_.ray_fit) ws.fit_rays[r].Subtract(ws.grid_rays[c]);
+        const auto [cx, cy] = grid_xy(c);
+        bool next_to_other_plane = false;
+        for (int i = 0; i < 9; ++i) {
+          const int o = region_at(cx + i % 3 - 1, cy + i / 3 - 1);
+          next_to_other_plane |= o >= 0 && o != r;
+        }
+        if (!next_to_other_plane) continue;
+        ws.apart_sums[r].Subtract(ws.sums[c]);
+        if (params_.ray_fit) ws.apart_rays[r].Subtract(ws.grid_rays[c]);
       }
       for (std::size_t r = 0; r < num_regions; ++r) {
         if (ws.fit_sums[r].k >= 0.25 * ws.regions[r].k) continue;
-        ws.fit_sums[r] = ws.regions[r];
-        if (params_.ray_fit) ws.fit_rays[r] = ws.rays[r];
+        const bool apart = ws.apart_sums[r].k >= 0.25 * ws.regions[r].k;
+        ws.fit_sums[r] = apart ? ws.apart_sums[r] : ws.regions[r];
+        if (params_.ray_fit) ws.fit_rays[r] = apart ? ws.apart_rays[r] : ws.rays[r];
       }
     }
   }

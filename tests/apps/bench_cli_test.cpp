@@ -85,11 +85,10 @@ TEST(BenchCli, SpeedRatioOverVgaFramesLeavesTheLaserScanOut) {
   if (!fs::exists(kinect) || !fs::exists(scan)) GTEST_SKIP() << kinect << " or " << scan;
   const fs::path dir = test::ScratchDir();
   const fs::path json = dir / "bench.json";
-  const test::CliResult r =
-      test::RunCli("bench detect '" + kinect.string() + "' '" + scan.string() +
-                       "' --methods grid-fast,pcl_omps --repeat 1 --json '" + json.string() +
-                       "' --quiet",
-                   dir);
+  const test::CliResult r = test::RunCli(
+      "bench detect '" + kinect.string() + "' '" + scan.string() +
+          "' --methods grid-fast,pcl_omps --repeat 1 --json '" + json.string() + "' --quiet",
+      dir);
   ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
   std::ifstream in(json);
   ASSERT_TRUE(in.good()) << r.out;

@@ -42,7 +42,8 @@ TEST(DetectorFactory, EveryMethodOnDegenerateClouds) {
     datasets::OrganizedCloud cloud(w, h);
     for (int y = 0; y < h; ++y) {
       for (int x = 0; x < w; ++x) {
-        // Holes: one pixel in 11, so that every 5x5 grid keeps the 21 points it needs.
+        // Holes: one pixel in 11, so that every grid of up to 6x6 keeps the points it needs
+        // (31 of 36).
         const bool hole = holes && (x * 7 + y * 3) % 11 == 0;
         cloud.at(y, x) = hole ? Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN())
                               : Eigen::Vector3f(0.004f * (x - w / 2), 0.004f * (y - h / 2), 2.0f);

@@ -49,15 +49,22 @@ struct GridParams {
   /// plane that fits it better within tolerance; without the pixel-level refinement, each plane
   /// is then fitted to its interior grids (all 8 neighbours in the plane).
   bool refine_grids = false;
+  /// Depth model: a growing region whose second-smallest spread l2 / K is under this many times
+  /// its ray noise (trace W / K) has no resolved normal yet (on a far wall, where the noise
+  /// exceeds a grid's width, a strip of grids fits the plane across the strip): it joins grids by
+  /// the MSE test alone, without the angle and coplanarity tests. 0 = off (every region's normal
+  /// counts from its seed on).
+  double unresolved_spread = 0.0;
 
   int EffectiveMu() const { return mu > 0 ? mu : cell_size * cell_size - cell_size + 1; }
   std::vector<std::string> Validate() const;
 };
 
-/// Turns parameters into those of GBRG's fast variant (method `grid-fast`): 5x5 grids, the
-/// grid-level refinement in place of the pixel-level one, so that every pixel keeps its grid's
-/// label and each plane is fitted (along the rays, as set) to its interior grids.
-/// Merging and the ray fit stay as set.
+/// Turns parameters into those of GBRG's fast variant (method `grid-fast`): 6x6 grids, regions
+/// without a resolved normal grown by the MSE test alone (unresolved_spread 2), the grid-level
+/// refinement in place of the pixel-level one, so that every pixel keeps its grid's label and
+/// each plane is fitted (along the rays, as set) to its interior grids. Merging and the ray fit
+/// stay as set.
 void UseFastVariant(DetectionParams& params, GridParams& grid);
 
 class GridRegionGrowing : public PlaneDetector {
