@@ -84,8 +84,9 @@ void VisitGrid(FieldVisitor& v, detection::GridParams& c) {
           "N/64 joins of an N-grid region, exact MSE test)",
           0, 1000000);
   v.Field("refine_grids", c.refine_grids,
-          "each grid at a plane's border goes whole to the adjacent plane that fits it better; "
-          "without detection.refine_boundary planes are then fitted to their interior grids");
+          "each grid at a plane's border, in a plane or outside every plane, goes whole to the "
+          "adjacent plane that fits it best within tolerance; without detection.refine_boundary "
+          "planes are then fitted to their interior grids");
   v.Field("unresolved_spread", c.unresolved_spread,
           "depth model: a growing region whose second-smallest spread is under this many times "
           "its ray noise has no resolved normal yet and joins grids by the MSE test alone "

@@ -90,7 +90,11 @@ TEST(RealData, TumStructureNotextureFarFirstFrame) {
   DetectionParams fast_params;
   GridParams fast_grid;
   UseFastVariant(fast_params, fast_grid);
-  CheckTumScene(GridRegionGrowing(fast_params, fast_grid).Detect(cloud), cloud, "grid-fast");
+  const Segmentation fast = GridRegionGrowing(fast_params, fast_grid).Detect(cloud);
+  CheckTumScene(fast, cloud, "grid-fast");
+  // The grid-level refinement also gives a plane the grids along its rim that growth left out
+  // when they fit it: 83.6 % of the valid pixels assigned before it did, 92.7 % after.
+  EXPECT_GT(AssignedFraction(fast, cloud), 0.9);
 }
 
 /// Laser scan of a house (3DTK convention: y up, left-handed), centimetres -> metres. The

@@ -45,9 +45,10 @@ struct GridParams {
   double alpha = 0.006;    ///< linear when l2 <= alpha l3 (paper value)
   double beta = 0.4;       ///< planar when l1 <= beta l2 (paper value)
   int refit_interval = 0;  ///< 1 = refit the plane on every join (paper); N = every N; 0 = adaptive
-  /// Before any pixel-level refinement: each grid at a plane's border goes whole to the adjacent
-  /// plane that fits it better within tolerance; without the pixel-level refinement, each plane
-  /// is then fitted to its interior grids (all 8 neighbours in the plane).
+  /// Before any pixel-level refinement: each grid at a plane's border, in a plane (when another
+  /// fits it better) or outside every plane (with at least mu points), goes whole to the adjacent
+  /// plane that fits it best within tolerance; without the pixel-level refinement, each plane is
+  /// then fitted to its interior grids (all 8 neighbours in the plane).
   bool refine_grids = false;
   /// Depth model: a growing region whose second-smallest spread l2 / K is under this many times
   /// its ray noise (trace W / K) has no resolved normal yet (on a far wall, where the noise
