@@ -515,8 +515,9 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // grid's normal is noise and gets no angle test, so a plane grazing a wall picks up the wall's
   // grids along their corner (the synthetic room's right wall with 5x5 grids: 8 % of its points,
   // 2.5 cm of offset). And it gives a plane the grids along its rim that growth left out (classed
-  // non-planar by a few stray pixels, or left in a region too small to be a plane) when they fit
-  // it (grid-fast on TUM frame 0: 83.6 -> 92.7 % of the valid pixels assigned); a grid that
+  // non-planar, refused by a test against a young region's plane, or left in a region too small
+  // to be a plane) when they fit it (grid-fast on TUM frame 0: 83.6 -> 92.7 % of the valid
+  // pixels assigned); a grid that
   // straddles two surfaces fits neither within tolerance and stays out. Candidate planes are
   // those grown in step 3, fixed during the pass, and the moves are applied after it, so the
   // result does not depend on grid order.
