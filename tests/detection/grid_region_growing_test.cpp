@@ -116,8 +116,8 @@ TEST(GridRegionGrowing, UnresolvedNormalsGrowByTheMseTestAlone) {
   // The noisy room 648 px wide with grid-fast's 6x6 grids: on the back wall 3.8 m away the depth
   // noise (2 cm) exceeds a grid's width (4.3 cm) in spread, so a strip of grids fits the plane
   // across the strip. Held to that normal's angle and coplanarity tests, regions grew strips too
-  // short to be planes, and the wall (171k pixels) lost three quarters of them; grown by the MSE
-  // test alone until their normal is resolved, one region takes nearly all.
+  // short to be planes, and the wall (171k pixels) kept under a third of them in one plane; grown
+  // by the MSE test alone until their normal is resolved, one region takes nearly all.
   const auto frame = test::RenderScene(test::RoomPlanes(), 1.425e-3, 648, 648, 480);
   DetectionParams params;
   GridParams grid;
