@@ -590,6 +590,17 @@ void SumGridRow(const Eigen::Vector3f* points, int width, int height, int y0, in
       if (x0 + 4 * k > width) break;
       const std::size_t last = static_cast<std::size_t>(y1 - 1) * width + x0 + 4 * k - 1;
       if (last + 1 >= num_points) break;
+      // The same columns of the next band of rows, fetched while this band is summed: when the
+      // memory is busy this stage waits on the cloud (12 bytes a pixel), and the hardware
+      // prefetcher, following k rows at once, does not run far enough ahead (grid-fast's moments
+      // stage 1.39 -> 1.20 ms in alternating runs; a band further ahead was slower).
+      const std::size_t next_band = static_cast<std::size_t>(y1) * width + x0;
+      for (int y = 0; y < y1 - y0; ++y) {
+        const std::size_t first = next_band + static_cast<std::size_t>(y) * width;
+        if (first + 4 * static_cast<std::size_t>(k) > num_points) break;
+        const char* row = reinterpret_cast<const char*>(points + first);
+        for (int byte = 0; byte < 12 * 4 * k; byte += 64) __builtin_prefetch(row + byte);
+      }
       SumFourGridsAvx2(points, width, x0, y0, y1, k, spherical, params, sums + cx,
                        rays != nullptr ? rays + cx : nullptr);
     }
