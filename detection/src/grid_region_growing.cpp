@@ -571,11 +571,13 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   };
   if (grid_.refine_grids && num_regions > 0 && refine_edge_grids()) find_edge_grids();
   // Pixel labels from a value per grid. Each band of k rows is written once: a row of grid values
-  // expanded to pixels, copied to every row of the band, then the invalid pixels of partly valid
-  // grids with a value >= 0 set to -1. The copy is a plain loop: with memcpy (rep movsb on the
-  // Zen 3 development machine) the stages that read the labels next ran 0.2 ms slower.
+  // expanded to pixels, appended once for every row of the band, then the invalid pixels of
+  // partly valid grids with a value >= 0 set to -1. Appended, not resized and overwritten:
+  // resizing fills the whole image with zeros first, a second pass over 1.2 MB (grid-fast's
+  // finalize stage 0.51 -> 0.39 ms in alternating runs on TUM frames).
   auto expand_to_pixels = [&](const std::int32_t* grid_values, std::vector<std::int32_t>& pixels) {
-    pixels.resize(static_cast<std::size_t>(width) * height);
+    pixels.clear();
+    pixels.reserve(static_cast<std::size_t>(width) * height);
     ws.row_labels.resize(width);
     for (int cy = 0; cy < cells_y; ++cy) {
       const int y0 = cy * k, y1 = std::min(height, y0 + k);
@@ -586,9 +588,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         std::fill_n(ws.row_labels.data() + cx * k, std::min(k, width - cx * k), values[cx]);
       }
       for (int y = y0; y < y1; ++y) {
-        std::int32_t* dst = pixels.data() + static_cast<std::size_t>(y) * width;
-        const std::int32_t* src = ws.row_labels.data();
-        for (int x = 0; x < width; ++x) dst[x] = src[x];
+        pixels.insert(pixels.end(), ws.row_labels.begin(), ws.row_labels.end());
       }
       for (int cx = 0; cx < cells_x; ++cx) {
         const int x0 = cx * k, x1 = std::min(width, x0 + k);
