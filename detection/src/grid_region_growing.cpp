@@ -348,12 +348,16 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       if (ws.mark[g] == kTaken) continue;
       ws.mark[g] = -1;  // may be queued again by a later neighbour if rejected now
       // The wavefront of a large region spans more grids than the cache holds: fetch the data of
-      // the grids a few places ahead in the queue while this one is tested.
+      // the grids a few places ahead in the queue while this one is tested. A grid's sums (128
+      // bytes) lie across three cache lines unless the array happens to start on a line: all
+      // three are fetched (grow stage, alternating runs: grid3 2.67 -> 2.42 ms, grid-fast 1.14 ->
+      // 0.97 ms).
       if (head + kPrefetchAhead < ws.queue.size()) {
         const int ahead = ws.queue[head + kPrefetchAhead];
         __builtin_prefetch(&ws.info[ahead]);
         __builtin_prefetch(&ws.sums[ahead]);
         __builtin_prefetch(reinterpret_cast<const char*>(&ws.sums[ahead]) + 64);
+        __builtin_prefetch(reinterpret_cast<const char*>(&ws.sums[ahead]) + sizeof(MomentSums) - 1);
       }
       const CellInfo& ci = ws.info[g];
       // Algorithm 2 line 8: angle, coplanarity, then the merged MSE (the only one needing a fit).
