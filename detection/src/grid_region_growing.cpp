@@ -69,7 +69,8 @@ struct Workspace {
   std::vector<int> edge_grids;           ///< grids with a neighbour outside their region
   std::vector<MomentSums> fit_sums;      ///< what each plane is fitted to (whole grids)
   std::vector<RaySums> fit_rays;
-  std::vector<MomentSums> apart_sums;  ///< each plane without its grids next to another plane
+  std::vector<std::uint8_t> narrow;    ///< planes too narrow for the interior fit
+  std::vector<MomentSums> apart_sums;  ///< such a plane without its grids next to another plane
   std::vector<RaySums> apart_rays;
   std::vector<std::int32_t> grid_ids;  ///< each grid's plane id (pixel labels = their grid's)
   std::vector<std::pair<int, int>> grid_moves;  ///< (grid, region) of the grid-level refinement
@@ -521,10 +522,9 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // 2.5 cm of offset). And it gives a plane the grids along its rim that growth left out (classed
   // non-planar, refused by a test against a young region's plane, or left in a region too small
   // to be a plane) when they fit it (grid-fast on TUM frame 0: 83.6 -> 92.7 % of the valid
-  // pixels assigned); a grid that
-  // straddles two surfaces fits neither within tolerance and stays out. Candidate planes are
-  // those grown in step 3, fixed during the pass, and the moves are applied after it, so the
-  // result does not depend on grid order.
+  // pixels assigned); a grid that straddles two surfaces fits neither within tolerance and stays
+  // out. Candidate planes are those grown in step 3, fixed during the pass, and the moves are
+  // applied after it, so the result does not depend on grid order.
   auto refine_edge_grids = [&] {
     ws.fits.resize(num_regions);
     for (std::size_t i = 0; i < num_regions; ++i) ws.fits[i] = FitSums(ws.regions[i]);
@@ -801,28 +801,45 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     if (grid_.refine_grids) {
       ws.fit_sums = ws.regions;
       ws.fit_rays = ws.rays;
-      ws.apart_sums = ws.regions;
-      ws.apart_rays = ws.rays;
       for (const int c : ws.edge_grids) {  // every grid of a plane that is not interior
         const int r = ws.cell_region[c];
         if (r < 0) continue;
         ws.fit_sums[r].Subtract(ws.sums[c]);
         if (params_.ray_fit) ws.fit_rays[r].Subtract(ws.grid_rays[c]);
-        const auto [cx, cy] = grid_xy(c);
-        bool next_to_other_plane = false;
-        for (int i = 0; i < 9; ++i) {
-          const int o = region_at(cx + i % 3 - 1, cy + i / 3 - 1);
-          next_to_other_plane |= o >= 0 && o != r;
-        }
-        if (!next_to_other_plane) continue;
-        ws.apart_sums[r].Subtract(ws.sums[c]);
-        if (params_.ray_fit) ws.apart_rays[r].Subtract(ws.grid_rays[c]);
       }
+      // The narrow planes only (most frames have none): their grids next to another plane.
+      ws.narrow.assign(num_regions, 0);
+      bool any_narrow = false;
       for (std::size_t r = 0; r < num_regions; ++r) {
-        if (ws.fit_sums[r].k >= 0.25 * ws.regions[r].k) continue;
-        const bool apart = ws.apart_sums[r].k >= 0.25 * ws.regions[r].k;
-        ws.fit_sums[r] = apart ? ws.apart_sums[r] : ws.regions[r];
-        if (params_.ray_fit) ws.fit_rays[r] = apart ? ws.apart_rays[r] : ws.rays[r];
+        ws.narrow[r] = ws.fit_sums[r].k < 0.25 * ws.regions[r].k;
+        any_narrow |= ws.narrow[r] != 0;
+      }
+      if (any_narrow) {
+        for (std::size_t r = 0; r < num_regions; ++r) {
+          if (!ws.narrow[r]) continue;
+          ws.fit_sums[r] = ws.regions[r];
+          if (params_.ray_fit) ws.fit_rays[r] = ws.rays[r];
+        }
+        ws.apart_sums = ws.fit_sums;
+        ws.apart_rays = ws.fit_rays;
+        for (const int c : ws.edge_grids) {
+          const int r = ws.cell_region[c];
+          if (r < 0 || !ws.narrow[r]) continue;
+          const auto [cx, cy] = grid_xy(c);
+          bool next_to_other_plane = false;
+          for (int i = 0; i < 9; ++i) {
+            const int o = region_at(cx + i % 3 - 1, cy + i / 3 - 1);
+            next_to_other_plane |= o >= 0 && o != r;
+          }
+          if (!next_to_other_plane) continue;
+          ws.apart_sums[r].Subtract(ws.sums[c]);
+          if (params_.ray_fit) ws.apart_rays[r].Subtract(ws.grid_rays[c]);
+        }
+        for (std::size_t r = 0; r < num_regions; ++r) {
+          if (!ws.narrow[r] || ws.apart_sums[r].k < 0.25 * ws.regions[r].k) continue;
+          ws.fit_sums[r] = ws.apart_sums[r];
+          if (params_.ray_fit) ws.fit_rays[r] = ws.apart_rays[r];
+        }
       }
     }
   }
