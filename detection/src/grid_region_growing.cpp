@@ -76,6 +76,7 @@ struct Workspace {
   std::vector<RaySums> apart_rays;
   std::vector<std::int32_t> grid_ids;  ///< each grid's plane id (pixel labels = their grid's)
   std::vector<std::pair<int, int>> grid_moves;  ///< (grid, region) of the grid-level refinement
+  std::vector<std::int32_t> candidate_stamp;    ///< per region (+1): last edge grid it was seen at
 };
 
 Workspace& ThreadWorkspace() {
@@ -560,21 +561,40 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     for (std::size_t i = 0; i < num_regions; ++i) ws.fits[i] = FitSums(ws.regions[i]);
     const double refine2 = params_.refine_sigmas * params_.refine_sigmas;
     ws.grid_moves.clear();
-    for (const int c : ws.edge_grids) {
+    // Each plane once among a grid's candidates, without a data-dependent branch: a plane is new
+    // to edge grid e while its stamp is not e + 1 (stamp 0 stands for no plane, never new).
+    ws.candidate_stamp.assign(num_regions + 1, 0);
+    std::int32_t* const stamp = ws.candidate_stamp.data() + 1;
+    const std::size_t num_edge = ws.edge_grids.size();
+    for (std::size_t e = 0; e < num_edge; ++e) {
+      const int c = ws.edge_grids[e];
+      if (e + kRefinePrefetchAhead < num_edge) {
+        const char* ahead =
+            reinterpret_cast<const char*>(&ws.sums[ws.edge_grids[e + kRefinePrefetchAhead]]);
+        __builtin_prefetch(ahead);
+        __builtin_prefetch(ahead + 64);
+        __builtin_prefetch(ahead + sizeof(MomentSums) - 1);
+      }
       const MomentSums& g = ws.sums[c];
       const auto [cx, cy] = grid_xy(c);
       const int own = ws.cell_region[c];
       if (own < 0 && ws.counts[c] < mu) continue;  // too few points to tell a fit
-      int candidates[9];  // the planes of the 3 x 3 grids around, each once
+      // The planes of the 3 x 3 grids around, each once (bounds checks only at the image border).
+      std::int32_t around[9];
+      if (cx > 0 && cy > 0 && cx + 1 < cells_x && cy + 1 < cells_y) {
+        for (int i = 0; i < 9; ++i)
+          around[i] = ws.cell_region[c + (i / 3 - 1) * cells_x + i % 3 - 1];
+      } else {
+        for (int i = 0; i < 9; ++i) around[i] = region_at(cx + i % 3 - 1, cy + i / 3 - 1);
+      }
+      const std::int32_t fresh_stamp = static_cast<std::int32_t>(e + 1);
+      stamp[-1] = fresh_stamp;
+      int candidates[9];
       int num_candidates = 0;
-      for (int oy = -1; oy <= 1; ++oy) {
-        for (int ox = -1; ox <= 1; ++ox) {
-          const int r = region_at(cx + ox, cy + oy);
-          if (r >= 0 && std::find(candidates, candidates + num_candidates, r) ==
-                            candidates + num_candidates) {
-            candidates[num_candidates++] = r;
-          }
-        }
+      for (const std::int32_t r : around) {
+        candidates[num_candidates] = r;
+        num_candidates += stamp[r] != fresh_stamp;
+        stamp[r] = fresh_stamp;
       }
       if (own >= 0 && num_candidates == 1) continue;  // its own plane only
       int best = -1;
