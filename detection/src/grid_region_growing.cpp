@@ -457,10 +457,15 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   std::vector<std::uint64_t>& seeds = ws.seeds;
   std::size_t next = 0;
   while (next < seeds.size()) {
-    seeds.erase(
-        std::remove_if(seeds.begin() + static_cast<std::ptrdiff_t>(next), seeds.end(),
-                       [&](std::uint64_t key) { return ws.mark[key & 0xffffffffu] == kTaken; }),
-        seeds.end());
+    // The keys of grids used meanwhile dropped, in order, without a branch per key (whether a
+    // grid is taken is data, not a pattern).
+    std::size_t kept = next;
+    for (std::size_t i = next; i < seeds.size(); ++i) {
+      const std::uint64_t key = seeds[i];
+      seeds[kept] = key;
+      kept += ws.mark[key & 0xffffffffu] != kTaken;
+    }
+    seeds.resize(kept);
     if (next >= seeds.size()) break;
     const std::size_t chunk = std::max<std::size_t>(256, (seeds.size() - next) / 32);
     const std::size_t end = std::min(seeds.size(), next + chunk);
