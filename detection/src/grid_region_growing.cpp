@@ -88,8 +88,8 @@ struct Workspace {
   std::vector<int> narrow_around;                       ///< the grids around them
   std::vector<int> visit;       ///< per grid: the last such plane it was found around (-1: none)
   std::vector<int> candidates;  ///< the plane and the planes next to it
-  std::vector<int> candidate_grid;  ///< a grid of each (for its plane id)
-  std::vector<FastFit> candidate_fits;
+  std::vector<int> candidate_grid;      ///< a grid of each (for its plane id)
+  std::vector<float> candidate_planes;  ///< n, d of each (best_plane_for_pixel)
   /// Moves of the pixel-level refinement of such a plane: (pixel, its grid, candidate it goes
   /// to: 0 the plane itself, -1 none).
   std::vector<std::tuple<std::size_t, int, int>> narrow_moves;
@@ -696,6 +696,34 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       if (ws.cell_region[c] >= 0) ws.rays[ws.cell_region[c]].Add(ws.grid_rays[c]);
     }
   }
+  // The pixel-level refinement's choice for one pixel (refine_boundary, and the narrow planes
+  // below): of the candidate planes (n, d: four floats each), the nearest in units of the pixel's
+  // tolerance, refine_sigmas sigma_n with sigma_n = sigma(z) |n.p| / z (gamma under the constant
+  // model), if within it, else -1; an earlier candidate wins a tie. Compared as
+  // best_dist * tol < dist * best_tol (no division), from ratio 1 (beyond tolerance). In float:
+  // at 50 m its rounding is a few micrometres, against tolerances of millimetres or more.
+  const float refine_sigmas_f = static_cast<float>(params_.refine_sigmas);
+  const float sigma_z2_f = static_cast<float>(s2), gamma_f = static_cast<float>(params_.gamma);
+  auto relative_noise = [&](float z) {  // sigma(z) / z
+    return s0 == 0.0 ? sigma_z2_f * z : static_cast<float>(params_.Sigma(z) / z);
+  };
+  auto best_plane_for_pixel = [&](const Eigen::Vector3f& pf, float rel, const float* planes,
+                                  int n) {
+    int best = -1;
+    float best_dist = 1.0f, best_tol = 1.0f;
+    for (int i = 0; i < n; ++i) {
+      const float* plane = planes + 4 * i;
+      const float np = plane[0] * pf.x() + plane[1] * pf.y() + plane[2] * pf.z();
+      const float tol = depth_model ? refine_sigmas_f * rel * std::abs(np) : gamma_f;
+      const float dist = std::abs(np - plane[3]);
+      // Selects rather than branches: which candidate wins is data, not a pattern.
+      const bool better = dist * best_tol < best_dist * tol;
+      best_dist = better ? dist : best_dist;
+      best_tol = better ? tol : best_tol;
+      best = better ? i : best;
+    }
+    return best;
+  };
   if (params_.refine_boundary && num_regions > 0) {
     // Pixel-level refinement of every edge grid: each valid pixel goes to the best-fitting
     // candidate plane (its own and the 8 neighbours') when within its tolerance, else to none.
@@ -708,8 +736,6 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     // which tilt its fit (TUM fr3 k = 1 repeatability, grid4: median angle 0.251 -> 0.236 deg).
     ws.fits.resize(num_regions);
     for (std::size_t i = 0; i < num_regions; ++i) ws.fits[i] = FitSums(ws.regions[i]);
-    const float rsf = static_cast<float>(params_.refine_sigmas);
-    const float s2f = static_cast<float>(s2), gammaf = static_cast<float>(params_.gamma);
     float cand[9][4];       // the candidate planes of a grid: n, d
     MomentSums gained[10];  // per candidate plane of the grid (and none): what it gains
     RaySums gained_rays[10];
@@ -766,22 +792,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
           const Eigen::Vector3f& pf = pts[idx];
           if (!std::isfinite(pf.z())) continue;
           const float z = internal::PointDepth(pf, spherical);
-          const float rel = s0 == 0.0 ? s2f * z : static_cast<float>(params_.Sigma(z) / z);
-          // Smallest |n.p - d| / tol, compared as best_dist * tol < dist * best_tol (no
-          // division); starts at ratio 1, i.e. beyond tolerance = no plane. In float: at 50 m
-          // its rounding is a few micrometres, against tolerances of millimetres or more.
-          int best = -1;
-          float best_dist = 1.0f, best_tol = 1.0f;
-          for (int i = 0; i < n_adj; ++i) {
-            const float np = cand[i][0] * pf.x() + cand[i][1] * pf.y() + cand[i][2] * pf.z();
-            const float tol = depth_model ? rsf * rel * std::abs(np) : gammaf;
-            const float dist = std::abs(np - cand[i][3]);
-            // Selects rather than branches: which candidate wins is data, not a pattern.
-            const bool better = dist * best_tol < best_dist * tol;
-            best_dist = better ? dist : best_dist;
-            best_tol = better ? tol : best_tol;
-            best = better ? i : best;
-          }
+          const int best = best_plane_for_pixel(pf, relative_noise(z), &cand[0][0], n_adj);
           const int to = best >= 0 ? adj[best] : -1;
           ws.labels[idx] = to;
           changed |= to != own;
@@ -874,12 +885,22 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // the grid's own plane does. Its plane is then fitted to its pixels; labels and sums follow.
   // (A pixel it gives away to a plane that is too narrow as well goes to none.)
   auto refine_narrow_plane = [&](int r, const std::vector<int>& grids) {
+    // Its plane and the planes next to its grids, as best_plane_for_pixel's candidates.
     std::vector<int>& candidates = ws.candidates;
-    std::vector<int>& candidate_grid = ws.candidate_grid;
-    std::vector<FastFit>& fits = ws.candidate_fits;
-    candidates.assign(1, r);
-    candidate_grid.assign(1, grids.front());
-    fits.assign(1, FitSums(ws.regions[r]));
+    std::vector<int>& candidate_grid = ws.candidate_grid;  // a grid of each, for its plane id
+    std::vector<float>& planes = ws.candidate_planes;
+    candidates.clear();
+    candidate_grid.clear();
+    planes.clear();
+    auto add_candidate = [&](int region, int grid, const MomentSums& m) {
+      const FastFit f = FitSums(m);
+      candidates.push_back(region);
+      candidate_grid.push_back(grid);
+      planes.insert(planes.end(),
+                    {static_cast<float>(f.normal.x()), static_cast<float>(f.normal.y()),
+                     static_cast<float>(f.normal.z()), static_cast<float>(f.d)});
+    };
+    add_candidate(r, grids.front(), ws.regions[r]);
     for (const int c : grids) {
       const auto [cx, cy] = grid_xy(c);
       for (int i = 0; i < 9; ++i) {
@@ -889,21 +910,9 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
           continue;
         }
         const MomentSums& m = ws.fit_sums[o].k >= 3 ? ws.fit_sums[o] : ws.regions[o];
-        if (m.k < 3) continue;
-        candidates.push_back(o);
-        candidate_grid.push_back(oy * cells_x + ox);
-        fits.push_back(FitSums(m));
+        if (m.k >= 3) add_candidate(o, oy * cells_x + ox, m);
       }
     }
-    // Distance to plane j and the pixel's tolerance there (the refinement's: refine_sigmas
-    // sigma_n, sigma_n = sigma(z) |n.p| / z; gamma under the constant model). Ratios of the two
-    // are compared cross-multiplied, without a division.
-    auto distance_tolerance = [&](const Eigen::Vector3d& p, double relative, std::size_t j,
-                                  double& distance, double& tolerance) {
-      const double np = fits[j].normal.dot(p);
-      distance = std::abs(np - fits[j].d);
-      tolerance = depth_model ? params_.refine_sigmas * relative * std::abs(np) : params_.gamma;
-    };
     auto for_each_pixel = [&](int c, const auto& visit_pixel) {
       const auto [cx, cy] = grid_xy(c);
       const int x0 = cx * k, y0 = cy * k;
@@ -912,36 +921,28 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         for (int x = x0; x < x1; ++x) {
           const std::size_t i = static_cast<std::size_t>(y) * width + x;
           const Eigen::Vector3f& pf = pts[i];
-          if (!std::isfinite(pf.z())) continue;
-          const float z = internal::PointDepth(pf, spherical);
-          visit_pixel(i, pf.cast<double>(), z > 0.0f ? params_.Sigma(z) / z : 0.0);
+          if (std::isfinite(pf.z())) visit_pixel(i, pf);
         }
       }
     };
-    auto& moves = ws.narrow_moves;
+    // Its grids' pixels: to the best candidate (0: itself), else to none.
+    auto& moves = ws.narrow_moves;  // (pixel, its grid, candidate it goes to: 0 itself, -1 none)
     moves.clear();
     MomentSums own;
+    const int num_candidates = static_cast<int>(candidates.size());
     for (const int c : grids) {
-      for_each_pixel(c, [&](std::size_t i, const Eigen::Vector3d& p, double relative) {
-        int best = -1;
-        double best_distance = 1.0, best_tolerance = 1.0;  // ratio 1: beyond tolerance, none
-        for (std::size_t j = 0; j < fits.size(); ++j) {
-          double distance, tolerance;
-          distance_tolerance(p, relative, j, distance, tolerance);
-          if (distance * best_tolerance < best_distance * tolerance) {
-            best_distance = distance;
-            best_tolerance = tolerance;
-            best = static_cast<int>(j);
-          }
-        }
+      for_each_pixel(c, [&](std::size_t i, const Eigen::Vector3f& pf) {
+        const float z = internal::PointDepth(pf, spherical);
+        const int best = best_plane_for_pixel(pf, relative_noise(z), planes.data(), num_candidates);
         if (best == 0) {
-          own.Add(p.x(), p.y(), p.z(), ws.noise_weight[c]);
+          own.Add(pf.x(), pf.y(), pf.z(), ws.noise_weight[c]);
         } else {
           moves.emplace_back(i, c, best);
         }
       });
     }
-    // The grids around its grids, each once.
+    // The pixels of the grids around its grids (each grid once): to it when it is the better of
+    // it and the grid's own plane, within tolerance.
     std::vector<int>& around = ws.narrow_around;
     around.clear();
     for (const int c : grids) {
@@ -960,19 +961,16 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     }
     for (const int n : around) {
       const int o = ws.cell_region[n];
-      const std::size_t j =
-          static_cast<std::size_t>(std::find(candidates.begin(), candidates.end(), o) -
-                                   candidates.begin());  // candidates.size(): none
-      for_each_pixel(n, [&](std::size_t i, const Eigen::Vector3d& p, double relative) {
-        double distance, tolerance;
-        distance_tolerance(p, relative, 0, distance, tolerance);
-        if (!(distance < tolerance)) return;
-        if (j < fits.size()) {
-          double other_distance, other_tolerance;
-          distance_tolerance(p, relative, j, other_distance, other_tolerance);
-          if (other_distance * tolerance <= distance * other_tolerance) return;
-        }
-        own.Add(p.x(), p.y(), p.z(), ws.noise_weight[n]);
+      const int j =
+          static_cast<int>(std::find(candidates.begin(), candidates.end(), o) - candidates.begin());
+      float pair[8];  // itself, then the grid's own plane if it is a candidate
+      std::copy(planes.begin(), planes.begin() + 4, pair);
+      const int num_pair = j < num_candidates ? 2 : 1;
+      if (num_pair == 2) std::copy(planes.begin() + 4 * j, planes.begin() + 4 * j + 4, pair + 4);
+      for_each_pixel(n, [&](std::size_t i, const Eigen::Vector3f& pf) {
+        const float z = internal::PointDepth(pf, spherical);
+        if (best_plane_for_pixel(pf, relative_noise(z), pair, num_pair) != 0) return;
+        own.Add(pf.x(), pf.y(), pf.z(), ws.noise_weight[n]);
         moves.emplace_back(i, n, 0);
       });
     }
@@ -980,23 +978,22 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     // Apply: its sums become those of its pixels; the others' gain and lose what moved.
     RaySums own_rays;
     for (const int c : grids) {
-      // Its grids' rays, less those of the pixels that leave (added back below as negatives).
+      // Its grids' rays, less those of the pixels that leave (added below with weight -w).
       if (params_.ray_fit) own_rays.Add(ws.grid_rays[c]);
     }
     for (const auto& [i, c, to] : moves) {
       const Eigen::Vector3f& pf = pts[i];
       const float z = internal::PointDepth(pf, spherical);
-      const double w = ws.noise_weight[c];
       const int from = ws.cell_region[c];
       MomentSums pixel;
-      pixel.Add(pf.x(), pf.y(), pf.z(), w);
+      pixel.Add(pf.x(), pf.y(), pf.z(), ws.noise_weight[c]);
       if (to == 0) {  // from a grid around into this plane
         if (from >= 0) ws.regions[from].Subtract(pixel);
         if (params_.ray_fit && z > 0.0f) own_rays.Add(pf, z, params_.RayFitWeight(z));
         ws.pixel_overrides.emplace_back(i, grids.front());
         continue;
       }
-      // out of this plane's grids: to another plane, or to none
+      // Out of this plane's grids: to another plane, or to none.
       if (params_.ray_fit && z > 0.0f) own_rays.Add(pf, z, -params_.RayFitWeight(z));
       const bool to_other = to > 0 && !ws.too_narrow[candidates[to]];
       if (to_other) ws.regions[candidates[to]].Merge(pixel);
