@@ -883,7 +883,8 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // the planes next to its grids fits the pixel best within the pixel's tolerance, else to none;
   // a pixel of a grid around goes to it when it fits the pixel within tolerance and better than
   // the grid's own plane does. Its plane is then fitted to its pixels; labels and sums follow.
-  // (A pixel it gives away to a plane that is too narrow as well goes to none.)
+  // (A pixel it gives away to a plane that is too narrow as well goes to none.) Only planes of
+  // kNarrowRefineMinPoints or more (see there).
   auto refine_narrow_plane = [&](int r, const std::vector<int>& grids) {
     // Its plane and the planes next to its grids, as best_plane_for_pixel's candidates.
     std::vector<int>& candidates = ws.candidates;

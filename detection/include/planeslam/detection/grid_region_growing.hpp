@@ -64,8 +64,9 @@ struct GridParams {
 /// Turns parameters into those of GBRG's fast variant (method `grid-fast`): 6x6 grids, regions
 /// without a resolved normal grown by the MSE test alone (unresolved_spread 2), the grid-level
 /// refinement in place of the pixel-level one, so that every pixel keeps its grid's label and
-/// each plane is fitted (along the rays, as set) to its interior grids. Merging and the ray fit
-/// stay as set.
+/// each plane is fitted (along the rays, as set) to its interior grids; only a plane of 2000
+/// points or more too narrow for any such fit (a column or two of grids) gets the pixel-level
+/// refinement on its grids and those around them. Merging and the ray fit stay as set.
 void UseFastVariant(DetectionParams& params, GridParams& grid);
 
 class GridRegionGrowing : public PlaneDetector {
