@@ -82,7 +82,8 @@ struct Workspace {
   std::vector<std::uint8_t> narrow;    ///< planes too narrow for the interior fit
   std::vector<MomentSums> apart_sums;  ///< such a plane without its grids next to another plane
   std::vector<RaySums> apart_rays;
-  std::vector<std::uint8_t> too_narrow;  ///< planes too narrow for the apart fit as well
+  std::vector<std::uint8_t> too_narrow;     ///< planes too narrow for the apart fit as well
+  std::vector<std::uint8_t> refine_pixels;  ///< those of them refined pixel by pixel
   std::vector<std::pair<int, int>> narrow_plane_grids;  ///< (such a plane, one of its grids)
   std::vector<int> narrow_grids;                        ///< the grids of one such plane
   std::vector<int> narrow_around;                       ///< the grids around them
@@ -902,16 +903,25 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
                      static_cast<float>(f.normal.z()), static_cast<float>(f.d)});
     };
     add_candidate(r, grids.front(), ws.regions[r]);
+    // One walk over the 3 x 3 neighbourhoods of its grids: the planes there (candidates) and the
+    // grids around its grids (each once; not those of a plane too narrow as well).
+    std::vector<int>& around = ws.narrow_around;
+    around.clear();
     for (const int c : grids) {
       const auto [cx, cy] = grid_xy(c);
       for (int i = 0; i < 9; ++i) {
         const int ox = cx + i % 3 - 1, oy = cy + i / 3 - 1;
-        const int o = region_at(ox, oy);
-        if (o < 0 || std::find(candidates.begin(), candidates.end(), o) != candidates.end()) {
-          continue;
+        if (ox < 0 || oy < 0 || ox >= cells_x || oy >= cells_y) continue;
+        const int n = oy * cells_x + ox;
+        const int o = ws.cell_region[n];
+        if (o == r) continue;
+        if (o >= 0 && std::find(candidates.begin(), candidates.end(), o) == candidates.end()) {
+          const MomentSums& m = ws.fit_sums[o].k >= 3 ? ws.fit_sums[o] : ws.regions[o];
+          if (m.k >= 3) add_candidate(o, n, m);
         }
-        const MomentSums& m = ws.fit_sums[o].k >= 3 ? ws.fit_sums[o] : ws.regions[o];
-        if (m.k >= 3) add_candidate(o, oy * cells_x + ox, m);
+        if ((o >= 0 && ws.too_narrow[o]) || ws.counts[n] == 0 || ws.visit[n] == r) continue;
+        ws.visit[n] = r;
+        around.push_back(n);
       }
     }
     auto for_each_pixel = [&](int c, const auto& visit_pixel) {
@@ -942,24 +952,8 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         }
       });
     }
-    // The pixels of the grids around its grids (each grid once): to it when it is the better of
-    // it and the grid's own plane, within tolerance.
-    std::vector<int>& around = ws.narrow_around;
-    around.clear();
-    for (const int c : grids) {
-      const auto [cx, cy] = grid_xy(c);
-      for (int i = 0; i < 9; ++i) {
-        const int ox = cx + i % 3 - 1, oy = cy + i / 3 - 1;
-        if (ox < 0 || oy < 0 || ox >= cells_x || oy >= cells_y) continue;
-        const int n = oy * cells_x + ox;
-        const int o = ws.cell_region[n];
-        if (o == r || (o >= 0 && ws.too_narrow[o]) || ws.counts[n] == 0 || ws.visit[n] == r) {
-          continue;
-        }
-        ws.visit[n] = r;
-        around.push_back(n);
-      }
-    }
+    // The pixels of the grids around its grids: to it when it is the better of it and the grid's
+    // own plane, within tolerance.
     for (const int n : around) {
       const int o = ws.cell_region[n];
       const int j =
@@ -1054,7 +1048,8 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
           if (params_.ray_fit) ws.apart_rays[r].Subtract(ws.grid_rays[c]);
         }
         ws.too_narrow.assign(num_regions, 0);
-        bool any_too_narrow = false;
+        ws.refine_pixels.assign(num_regions, 0);
+        bool any_refined = false;
         for (std::size_t r = 0; r < num_regions; ++r) {
           if (!ws.narrow[r]) continue;
           if (ws.apart_sums[r].k >= 0.25 * ws.regions[r].k) {
@@ -1062,20 +1057,18 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
             if (params_.ray_fit) ws.fit_rays[r] = ws.apart_rays[r];
           } else {
             ws.too_narrow[r] = 1;
-            any_too_narrow |= ws.regions[r].k >= kNarrowRefineMinPoints;
+            ws.refine_pixels[r] = ws.regions[r].k >= kNarrowRefineMinPoints;
+            any_refined |= ws.refine_pixels[r] != 0;
           }
         }
-        if (any_too_narrow) {
-          // Their grids, plane by plane, from one look at every grid.
+        if (any_refined) {
+          // Their grids, plane by plane (then in grid order), from one look at every grid.
           ws.narrow_plane_grids.clear();
           for (int c = 0; c < num_cells; ++c) {
             const int r = ws.cell_region[c];
-            if (r >= 0 && ws.too_narrow[r] && ws.regions[r].k >= kNarrowRefineMinPoints) {
-              ws.narrow_plane_grids.emplace_back(r, c);
-            }
+            if (r >= 0 && ws.refine_pixels[r]) ws.narrow_plane_grids.emplace_back(r, c);
           }
-          std::stable_sort(ws.narrow_plane_grids.begin(), ws.narrow_plane_grids.end(),
-                           [](const auto& a, const auto& b) { return a.first < b.first; });
+          std::sort(ws.narrow_plane_grids.begin(), ws.narrow_plane_grids.end());
           ws.visit.assign(num_cells, -1);
           for (std::size_t i = 0; i < ws.narrow_plane_grids.size();) {
             const int r = ws.narrow_plane_grids[i].first;
