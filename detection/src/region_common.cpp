@@ -43,6 +43,9 @@ bool SolveRayFit(const RaySums& t, Eigen::Vector3d& normal, double& d) {
 /// many sigma(s) of it along its ray (three sigma of the sensor noise: plausibly its surface).
 constexpr double kCreaseGateSigmas = 3.0;
 
+/// How many candidates ahead the crease passes prefetch a pixel's point and labels.
+constexpr std::size_t kCreasePrefetchAhead = 8;
+
 /// A region's plane from the ray fit, and its centroid (which side of another plane it lies on).
 struct RayPlane {
   bool ok = false;  ///< false: no ray fit (too few pixels, or rays spanning a line)
@@ -68,12 +71,16 @@ RayPlane SolveRegion(const RaySums& sums, const MomentSums& region) {
 bool VisibleHere(const Eigen::Vector3f& p, double s, const RayPlane& own, const RayPlane& other,
                  const DetectionParams& params) {
   const Eigen::Vector3d pd = p.cast<double>();
-  const double np_own = own.normal.dot(pd), np_other = other.normal.dot(pd);
-  if (!(np_other > 0.0) || !(np_own > 0.0)) return false;
-  // Depths at which the pixel's ray meets each plane.
-  const double s_own = own.d * s / np_own, s_other = other.d * s / np_other;
+  // Depths at which the pixel's ray meets each plane; the gate on `other`'s first, which turns
+  // most pixels away before `own`'s is worked out.
+  const double np_other = other.normal.dot(pd);
+  if (!(np_other > 0.0)) return false;
+  const double s_other = other.d * s / np_other;
   const double sigma = params.Sigma(s);
   if (sigma > 0.0 && std::abs(s_other - s) > kCreaseGateSigmas * sigma) return false;
+  const double np_own = own.normal.dot(pd);
+  if (!(np_own > 0.0)) return false;
+  const double s_own = own.d * s / np_own;
   // Signed offsets of each region's centroid from the other's plane (< 0: on the sensor side).
   const double own_vs_other = other.normal.dot(own.centroid) - other.d;
   const double other_vs_own = own.normal.dot(other.centroid) - own.d;
@@ -105,6 +112,7 @@ std::vector<RayPlane> FitAlongRays(const datasets::OrganizedCloud& cloud,
   const bool spherical = cloud.model == datasets::SensorModel::kSpherical;
   const int width = cloud.width, height = cloud.height;
   auto weight = [&](double s) { return params.RayFitWeight(s); };
+  const double inv_width = 1.0 / std::max(width, 1);
   // The first crease pass visits the pixels on a border between two regions.
   std::vector<std::size_t> candidates = border_pixels;
   std::vector<char> queued(labels.size(), 0);
@@ -123,12 +131,20 @@ std::vector<RayPlane> FitAlongRays(const datasets::OrganizedCloud& cloud,
     // A point behind the sensor (possible in a PCD) never entered the ray sums: it stays.
     const double s = PointDepth(cloud.points[i], spherical);
     if (!(s > 0.0)) return r;
-    const int x = static_cast<int>(i % width), y = static_cast<int>(i / width);
+    // The pixel's row and column without an integer division: (i + 0.5) / width is at least
+    // 0.5 / width from an integer, far beyond the product's rounding.
+    const int y = static_cast<int>((static_cast<double>(i) + 0.5) * inv_width);
+    const int x = static_cast<int>(i) - y * width;
     const std::int32_t around[4] = {x > 0 ? labels[i - 1] : -1, x + 1 < width ? labels[i + 1] : -1,
                                     y > 0 ? labels[i - width] : -1,
                                     y + 1 < height ? labels[i + width] : -1};
-    for (const std::int32_t other : around) {
+    for (int a = 0; a < 4; ++a) {
+      const std::int32_t other = around[a];
       if (other < 0 || other == r || !planes[other].ok) continue;
+      // A region met twice (left and above, say) gets the same answer twice: asked once.
+      bool asked = false;
+      for (int b = 0; b < a; ++b) asked |= around[b] == other;
+      if (asked) continue;
       if (VisibleHere(cloud.points[i], s, planes[r], planes[other], params)) return other;
     }
     return r;
@@ -138,7 +154,18 @@ std::vector<RayPlane> FitAlongRays(const datasets::OrganizedCloud& cloud,
   for (int pass = 0; pass < kCreasePasses && !candidates.empty(); ++pass) {
     // Decide every move of the pass on the same planes, then apply them.
     moves.clear();
-    for (const std::size_t i : candidates) {
+    const std::size_t num_candidates = candidates.size();
+    for (std::size_t j = 0; j < num_candidates; ++j) {
+      const std::size_t i = candidates[j];
+      // The candidates lie scattered over a cloud that has mostly left the caches since growth
+      // read it: fetch the point and the labels around it a few candidates ahead.
+      if (j + kCreasePrefetchAhead < num_candidates) {
+        const std::size_t ahead = candidates[j + kCreasePrefetchAhead];
+        __builtin_prefetch(&cloud.points[ahead]);
+        __builtin_prefetch(&labels[ahead]);
+        if (ahead >= static_cast<std::size_t>(width)) __builtin_prefetch(&labels[ahead - width]);
+        if (ahead + width < labels.size()) __builtin_prefetch(&labels[ahead + width]);
+      }
       queued[i] = 0;
       const std::int32_t to = competitor(i);
       if (to != labels[i]) moves.emplace_back(i, to);
