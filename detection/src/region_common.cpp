@@ -250,31 +250,53 @@ RegionBorders RegionBorderScan::Finish() {
   return std::move(borders_);
 }
 
+namespace {
+
+/// Every region's ray sums from a region-index image: runs of one label are summed locally and
+/// flushed when the label changes. A loop of its own, with no call in it, so that the run's nine
+/// sums stay in registers (beside the border scan's calls they lived on the stack: a load and a
+/// store per sum and pixel).
+template <bool kSpherical>
+void SumRaysByLabel(const datasets::OrganizedCloud& cloud, const std::vector<std::int32_t>& labels,
+                    const DetectionParams& params, std::vector<RaySums>& rays) {
+  RaySums run;
+  std::int32_t run_label = -1;
+  const std::size_t num_pixels = labels.size();
+  for (std::size_t i = 0; i < num_pixels; ++i) {
+    const std::int32_t r = labels[i];
+    if (r < 0) continue;
+    if (r != run_label) {
+      if (run_label >= 0) rays[run_label].Add(run);
+      run = RaySums();
+      run_label = r;
+    }
+    // A point behind the sensor (possible in a PCD) has no ray fit weight.
+    const float s = PointDepth(cloud.points[i], kSpherical);
+    if (s > 0.0f) run.Add(cloud.points[i], s, params.RayFitWeight(s));
+  }
+  if (run_label >= 0) rays[run_label].Add(run);
+}
+
+}  // namespace
+
 RegionBorders ScanLabelImage(const datasets::OrganizedCloud& cloud,
                              const std::vector<std::int32_t>& labels, std::size_t num_regions,
                              const DetectionParams& params, std::vector<RaySums>* rays) {
-  const bool spherical = cloud.model == datasets::SensorModel::kSpherical;
   const int width = cloud.width, height = cloud.height;
+  if (rays) {
+    rays->assign(num_regions, RaySums());
+    if (cloud.model == datasets::SensorModel::kSpherical) {
+      SumRaysByLabel<true>(cloud, labels, params, *rays);
+    } else {
+      SumRaysByLabel<false>(cloud, labels, params, *rays);
+    }
+  }
   RegionBorderScan borders(labels, width, height);
-  if (rays) rays->assign(num_regions, RaySums());
-  // Runs of one label are summed locally and flushed when the label changes.
-  RaySums run;
-  std::int32_t run_label = -1;
   for (int y = 0; y < height; ++y) {
     for (int x = 0; x < width; ++x) {
       const std::size_t i = static_cast<std::size_t>(y) * width + x;
       const std::int32_t r = labels[i];
       if (r < 0) continue;
-      if (rays) {
-        if (r != run_label) {
-          if (run_label >= 0) (*rays)[run_label].Add(run);
-          run = RaySums();
-          run_label = r;
-        }
-        // A point behind the sensor (possible in a PCD) has no ray fit weight.
-        const float s = PointDepth(cloud.points[i], spherical);
-        if (s > 0.0f) run.Add(cloud.points[i], s, params.RayFitWeight(s));
-      }
       // Right and down neighbours: every 4-adjacent pair of pixels once.
       if (x + 1 < width && labels[i + 1] >= 0 && labels[i + 1] != r) borders.Add(i, r, i + 1);
       if (y + 1 < height && labels[i + width] >= 0 && labels[i + width] != r) {
@@ -282,7 +304,6 @@ RegionBorders ScanLabelImage(const datasets::OrganizedCloud& cloud,
       }
     }
   }
-  if (rays && run_label >= 0) (*rays)[run_label].Add(run);
   return borders.Finish();
 }
 
