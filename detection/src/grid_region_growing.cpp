@@ -70,6 +70,7 @@ struct Workspace {
   std::vector<std::uint64_t> seeds;
   std::vector<MomentSums> regions;
   std::vector<FastFit> fits;
+  std::vector<float> plane_nd;  ///< each region's n, d in float (pixel-level refinement)
   std::vector<std::int32_t> labels;
   std::vector<std::int32_t> row_labels;  ///< one row of grid labels expanded to pixels
   std::vector<RaySums> grid_rays;        ///< ray sums of each grid's pixels (ray fit)
@@ -735,8 +736,16 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     // gamma, which lets growth absorb a large region's gentle bending, would here hand a plane
     // the strip of the adjacent surface along their crease and the mixed pixels of depth edges,
     // which tilt its fit (TUM fr3 k = 1 repeatability, grid4: median angle 0.251 -> 0.236 deg).
-    ws.fits.resize(num_regions);
-    for (std::size_t i = 0; i < num_regions; ++i) ws.fits[i] = FitSums(ws.regions[i]);
+    // Each plane's n, d in float, once (best_plane_for_pixel's form), not per edge grid.
+    ws.plane_nd.resize(4 * num_regions);
+    for (std::size_t i = 0; i < num_regions; ++i) {
+      const FastFit f = FitSums(ws.regions[i]);
+      float* nd = ws.plane_nd.data() + 4 * i;
+      nd[0] = static_cast<float>(f.normal.x());
+      nd[1] = static_cast<float>(f.normal.y());
+      nd[2] = static_cast<float>(f.normal.z());
+      nd[3] = static_cast<float>(f.d);
+    }
     float cand[9][4];       // the candidate planes of a grid: n, d
     MomentSums gained[10];  // per candidate plane of the grid (and none): what it gains
     RaySums gained_rays[10];
@@ -758,29 +767,33 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       }
       const auto [cx, cy] = grid_xy(c);
       const int own = ws.cell_region[c];
+      // The planes of the grid and its 8 neighbours (-1: none or outside the image), read without
+      // bounds checks away from the image border.
+      int around[9];
+      if (cx > 0 && cy > 0 && cx + 1 < cells_x && cy + 1 < cells_y) {
+        const std::int32_t* above = ws.cell_region.data() + (c - cells_x - 1);
+        for (int i = 0; i < 3; ++i) {
+          around[i] = above[i];
+          around[3 + i] = above[cells_x + i];
+          around[6 + i] = above[2 * cells_x + i];
+        }
+      } else {
+        for (int i = 0; i < 9; ++i) around[i] = region_at(cx + i % 3 - 1, cy + i / 3 - 1);
+      }
       int adj[9];
       int n_adj = 0;
-      for (int oy = -1; oy <= 1; ++oy) {
-        for (int ox = -1; ox <= 1; ++ox) {
-          const int nx = cx + ox, ny = cy + oy;
-          if (nx < 0 || ny < 0 || nx >= cells_x || ny >= cells_y) continue;
-          const int r = ws.cell_region[ny * cells_x + nx];
-          if (r < 0) continue;
-          // Insert keeping adj sorted and unique: the lowest region index wins distance ties.
-          int pos = 0;
-          while (pos < n_adj && adj[pos] < r) ++pos;
-          if (pos < n_adj && adj[pos] == r) continue;
-          for (int j = n_adj; j > pos; --j) adj[j] = adj[j - 1];
-          adj[pos] = r;
-          ++n_adj;
-        }
+      for (const int r : around) {
+        if (r < 0) continue;
+        // Insert keeping adj sorted and unique: the lowest region index wins distance ties.
+        int pos = 0;
+        while (pos < n_adj && adj[pos] < r) ++pos;
+        if (pos < n_adj && adj[pos] == r) continue;
+        for (int j = n_adj; j > pos; --j) adj[j] = adj[j - 1];
+        adj[pos] = r;
+        ++n_adj;
       }
       for (int i = 0; i < n_adj; ++i) {
-        const FastFit& f = ws.fits[adj[i]];
-        cand[i][0] = static_cast<float>(f.normal.x());
-        cand[i][1] = static_cast<float>(f.normal.y());
-        cand[i][2] = static_cast<float>(f.normal.z());
-        cand[i][3] = static_cast<float>(f.d);
+        std::memcpy(cand[i], ws.plane_nd.data() + 4 * adj[i], sizeof(cand[i]));
       }
       // Each valid pixel's plane, and whether they all went to one.
       const int y0 = cy * k, x0 = cx * k;
