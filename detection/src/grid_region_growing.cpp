@@ -71,6 +71,7 @@ struct Workspace {
   std::vector<MomentSums> regions;
   std::vector<FastFit> fits;
   std::vector<float> plane_nd;  ///< each region's n, d in float (pixel-level refinement)
+  std::vector<std::pair<std::size_t, int>> moved_pixels;  ///< of one edge grid (ditto)
   std::vector<std::int32_t> labels;
   std::vector<std::int32_t> row_labels;  ///< one row of grid labels expanded to pixels
   std::vector<RaySums> grid_rays;        ///< ray sums of each grid's pixels (ray fit)
@@ -746,6 +747,10 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       nd[2] = static_cast<float>(f.normal.z());
       nd[3] = static_cast<float>(f.d);
     }
+    // The moved pixels of one edge grid, in pixel order: (pixel, slot of the candidate plane it
+    // goes to, n_adj: none).
+    ws.moved_pixels.resize(static_cast<std::size_t>(k) * k);
+    std::pair<std::size_t, int>* const moved = ws.moved_pixels.data();
     float cand[9][4];       // the candidate planes of a grid: n, d
     MomentSums gained[10];  // per candidate plane of the grid (and none): what it gains
     RaySums gained_rays[10];
@@ -799,7 +804,8 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       const int y0 = cy * k, x0 = cx * k;
       const int y1 = std::min(height, y0 + k), x1 = std::min(width, x0 + k);
       int first_to = -2;  // -2: no valid pixel yet
-      bool one_plane = true, changed = false;
+      bool one_plane = true;
+      std::size_t num_moved = 0;  // valid pixels that leave `own`, with their slot (below)
       for (int y = y0; y < y1; ++y) {
         for (int x = x0; x < x1; ++x) {
           const std::size_t idx = static_cast<std::size_t>(y) * width + x;
@@ -809,12 +815,13 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
           const int best = best_plane_for_pixel(pf, relative_noise(z), &cand[0][0], n_adj);
           const int to = best >= 0 ? adj[best] : -1;
           ws.labels[idx] = to;
-          changed |= to != own;
+          moved[num_moved] = {idx, best >= 0 ? best : n_adj};  // kept if it leaves (no branch)
+          num_moved += to != own;
           if (first_to == -2) first_to = to;
           one_plane &= to == first_to;
         }
       }
-      if (!changed) continue;
+      if (num_moved == 0) continue;
       if (one_plane) {
         // The whole grid changes plane: move its sums.
         if (own >= 0) {
@@ -835,19 +842,12 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         gained[i] = MomentSums();
         gained_rays[i] = RaySums();
       }
-      for (int y = y0; y < y1; ++y) {
-        for (int x = x0; x < x1; ++x) {
-          const std::size_t idx = static_cast<std::size_t>(y) * width + x;
-          const int to = ws.labels[idx];
-          if (to == own) continue;  // also every invalid pixel of a grid outside the planes
-          const Eigen::Vector3f& pf = pts[idx];
-          if (!std::isfinite(pf.z())) continue;
-          int slot = 0;
-          while (slot < n_adj && adj[slot] != to) ++slot;
-          gained[slot].AddPosition(pf.x(), pf.y(), pf.z());
-          const float z = internal::PointDepth(pf, spherical);
-          if (params_.ray_fit && z > 0.0f) gained_rays[slot].Add(pf, z, params_.RayFitWeight(z));
-        }
+      for (std::size_t i = 0; i < num_moved; ++i) {
+        const auto [idx, slot] = moved[i];
+        const Eigen::Vector3f& pf = pts[idx];
+        gained[slot].AddPosition(pf.x(), pf.y(), pf.z());
+        const float z = internal::PointDepth(pf, spherical);
+        if (params_.ray_fit && z > 0.0f) gained_rays[slot].Add(pf, z, params_.RayFitWeight(z));
       }
       const double w = ws.noise_weight[c];
       MomentSums lost;
