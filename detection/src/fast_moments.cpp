@@ -395,94 +395,17 @@ __attribute__((target("avx2,fma"))) inline __m256d WidenMask(__m128 mask) {
   return _mm256_castsi256_pd(_mm256_cvtepi32_epi64(_mm_castps_si128(mask)));
 }
 
-/// The ray-sum pass of SumFourGridsAvx2, one copy per sensor model and weighting. With both tests
-/// inside one loop the compiler kept five of the nine accumulators on the stack (a load and a
-/// store per accumulator and pixel); the Kinect copy keeps all in registers (the pass on a
-/// 640 x 480 frame, 6x6 grids: 0.52 -> 0.41 ms, 3x3: 0.57 -> 0.40 ms, medians of alternating runs).
-template <bool kSpherical, bool kUniformWeight>
-__attribute__((target("avx2,fma"))) void SumFourGridRaysAvx2(const Eigen::Vector3f* points,
-                                                             int width, int x0, int y0, int y1,
-                                                             int k, const DetectionParams& params,
-                                                             RaySums* rays) {
-  const float* base = reinterpret_cast<const float*>(points);
-  const std::size_t lane_stride = 3 * static_cast<std::size_t>(k);
-  const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
-  const __m128 inf = _mm_set1_ps(std::numeric_limits<float>::infinity());
-  const __m128 one = _mm_set1_ps(1.0f);
-  auto index = [&](int y, int j) { return static_cast<std::size_t>(y) * width + x0 + j; };
-  const __m256d s0 = _mm256_set1_pd(params.sigma0), s2 = _mm256_set1_pd(params.sigma_z2);
-  __m256d a00 = _mm256_setzero_pd(), a01 = a00, a02 = a00, a11 = a00, a12 = a00, a22 = a00,
-          b0 = a00, b1 = a00, b2 = a00;
-  for (int y = y0; y < y1; ++y) {
-    for (int j = 0; j < k; ++j) {
-      __m128 xf, yf, zf;
-      LoadFourPoints(base + 3 * index(y, j), lane_stride, xf, yf, zf);
-      const __m128 valid = _mm_cmplt_ps(_mm_and_ps(zf, abs_mask), inf);
-      // The depth s (the range as internal::PointDepth forms it, lane by lane) and the ray p / s
-      // in float, as RaySums::Add; pixels at s <= 0 (or NaN) add nothing.
-      __m128 s = zf;
-      if constexpr (kSpherical) {
-        alignas(16) float range[4];
-        for (int g = 0; g < 4; ++g) {
-          range[g] =
-              internal::PointDepth(points[index(y, j) + static_cast<std::size_t>(g) * k], true);
-        }
-        s = _mm_load_ps(range);
-      }
-      const __m128 use = _mm_and_ps(valid, _mm_cmpgt_ps(s, _mm_setzero_ps()));
-      const __m128 inv_f = _mm_and_ps(_mm_div_ps(one, s), use);
-      const __m256d qx = _mm256_cvtps_pd(_mm_mul_ps(_mm_and_ps(xf, use), inv_f));
-      const __m256d qy = _mm256_cvtps_pd(_mm_mul_ps(_mm_and_ps(yf, use), inv_f));
-      const __m256d qz = _mm256_cvtps_pd(_mm_mul_ps(_mm_and_ps(zf, use), inv_f));
-      const __m256d inv = _mm256_cvtps_pd(inv_f);
-      __m256d wx = qx, wy = qy, wz = qz;
-      if constexpr (!kUniformWeight) {
-        // DetectionParams::InverseDepthWeight: (s^2 / sigma)^2, 1 where sigma <= 0.
-        const __m256d sd = _mm256_cvtps_pd(_mm_and_ps(s, use));
-        const __m256d sigma = _mm256_fmadd_pd(_mm256_mul_pd(s2, sd), sd, s0);
-        const __m256d t = _mm256_div_pd(_mm256_mul_pd(sd, sd), sigma);
-        __m256d w = _mm256_blendv_pd(_mm256_set1_pd(1.0), _mm256_mul_pd(t, t),
-                                     _mm256_cmp_pd(sigma, _mm256_setzero_pd(), _CMP_GT_OQ));
-        w = _mm256_and_pd(w, WidenMask(use));
-        wx = _mm256_mul_pd(w, qx);
-        wy = _mm256_mul_pd(w, qy);
-        wz = _mm256_mul_pd(w, qz);
-      }
-      a00 = _mm256_fmadd_pd(wx, qx, a00);
-      a01 = _mm256_fmadd_pd(wx, qy, a01);
-      a02 = _mm256_fmadd_pd(wx, qz, a02);
-      a11 = _mm256_fmadd_pd(wy, qy, a11);
-      a12 = _mm256_fmadd_pd(wy, qz, a12);
-      a22 = _mm256_fmadd_pd(wz, qz, a22);
-      b0 = _mm256_fmadd_pd(wx, inv, b0);
-      b1 = _mm256_fmadd_pd(wy, inv, b1);
-      b2 = _mm256_fmadd_pd(wz, inv, b2);
-    }
-  }
-  alignas(32) double lane[9][4];
-  const __m256d all[9] = {a00, a01, a02, a11, a12, a22, b0, b1, b2};
-  for (int i = 0; i < 9; ++i) _mm256_store_pd(lane[i], all[i]);
-  for (int g = 0; g < 4; ++g) {
-    RaySums& r = rays[g];
-    r.a00 = lane[0][g];
-    r.a01 = lane[1][g];
-    r.a02 = lane[2][g];
-    r.a11 = lane[3][g];
-    r.a12 = lane[4][g];
-    r.a22 = lane[5][g];
-    r.b0 = lane[6][g];
-    r.b1 = lane[7][g];
-    r.b2 = lane[8][g];
-  }
-}
-
 /// SumPixelBlock of four neighbouring k x k grids at once, one grid a lane: the grids whose
 /// first columns are x0, x0 + k, x0 + 2k, x0 + 3k, rows [y0, y1). Each lane adds its pixels in the
 /// scalar kernel's order; invalid pixels add zeros (masked) instead of being skipped. The moments
 /// and the ray sums take a pass each (with 10 and 9 accumulators, each fits the 16 registers).
+/// One copy per sensor model and ray weighting: with both tests inside the ray pass's loop the
+/// compiler kept five of its nine accumulators on the stack (a load and a store per accumulator
+/// and pixel); the Kinect copy keeps all in registers (the ray pass on a 640 x 480 frame, 6x6
+/// grids: 0.52 -> 0.41 ms, 3x3: 0.57 -> 0.40 ms, medians of alternating runs).
+template <bool kSpherical, bool kUniformWeight>
 __attribute__((target("avx2,fma"))) void SumFourGridsAvx2(const Eigen::Vector3f* points, int width,
                                                           int x0, int y0, int y1, int k,
-                                                          bool spherical,
                                                           const DetectionParams& params,
                                                           MomentSums* sums, RaySums* rays) {
   static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float), "points are packed float triples");
@@ -535,17 +458,68 @@ __attribute__((target("avx2,fma"))) void SumFourGridsAvx2(const Eigen::Vector3f*
     m.zz = lane[9][g];
   }
   if (rays == nullptr) return;
-  const bool uniform_weight = params.sigma0 == 0.0;  // RayFitWeight is 1
-  if (spherical) {
-    if (uniform_weight) {
-      SumFourGridRaysAvx2<true, true>(points, width, x0, y0, y1, k, params, rays);
-    } else {
-      SumFourGridRaysAvx2<true, false>(points, width, x0, y0, y1, k, params, rays);
+  const __m256d s0 = _mm256_set1_pd(params.sigma0), s2 = _mm256_set1_pd(params.sigma_z2);
+  __m256d a00 = _mm256_setzero_pd(), a01 = a00, a02 = a00, a11 = a00, a12 = a00, a22 = a00,
+          b0 = a00, b1 = a00, b2 = a00;
+  for (int y = y0; y < y1; ++y) {
+    for (int j = 0; j < k; ++j) {
+      __m128 xf, yf, zf;
+      LoadFourPoints(base + 3 * index(y, j), lane_stride, xf, yf, zf);
+      const __m128 valid = _mm_cmplt_ps(_mm_and_ps(zf, abs_mask), inf);
+      // The depth s (the range as internal::PointDepth forms it, lane by lane) and the ray p / s
+      // in float, as RaySums::Add; pixels at s <= 0 (or NaN) add nothing.
+      __m128 s = zf;
+      if constexpr (kSpherical) {
+        alignas(16) float range[4];
+        for (int g = 0; g < 4; ++g) {
+          range[g] =
+              internal::PointDepth(points[index(y, j) + static_cast<std::size_t>(g) * k], true);
+        }
+        s = _mm_load_ps(range);
+      }
+      const __m128 use = _mm_and_ps(valid, _mm_cmpgt_ps(s, _mm_setzero_ps()));
+      const __m128 inv_f = _mm_and_ps(_mm_div_ps(one, s), use);
+      const __m256d qx = _mm256_cvtps_pd(_mm_mul_ps(_mm_and_ps(xf, use), inv_f));
+      const __m256d qy = _mm256_cvtps_pd(_mm_mul_ps(_mm_and_ps(yf, use), inv_f));
+      const __m256d qz = _mm256_cvtps_pd(_mm_mul_ps(_mm_and_ps(zf, use), inv_f));
+      const __m256d inv = _mm256_cvtps_pd(inv_f);
+      __m256d wx = qx, wy = qy, wz = qz;
+      if constexpr (!kUniformWeight) {
+        // DetectionParams::InverseDepthWeight: (s^2 / sigma)^2, 1 where sigma <= 0.
+        const __m256d sd = _mm256_cvtps_pd(_mm_and_ps(s, use));
+        const __m256d sigma = _mm256_fmadd_pd(_mm256_mul_pd(s2, sd), sd, s0);
+        const __m256d t = _mm256_div_pd(_mm256_mul_pd(sd, sd), sigma);
+        __m256d w = _mm256_blendv_pd(_mm256_set1_pd(1.0), _mm256_mul_pd(t, t),
+                                     _mm256_cmp_pd(sigma, _mm256_setzero_pd(), _CMP_GT_OQ));
+        w = _mm256_and_pd(w, WidenMask(use));
+        wx = _mm256_mul_pd(w, qx);
+        wy = _mm256_mul_pd(w, qy);
+        wz = _mm256_mul_pd(w, qz);
+      }
+      a00 = _mm256_fmadd_pd(wx, qx, a00);
+      a01 = _mm256_fmadd_pd(wx, qy, a01);
+      a02 = _mm256_fmadd_pd(wx, qz, a02);
+      a11 = _mm256_fmadd_pd(wy, qy, a11);
+      a12 = _mm256_fmadd_pd(wy, qz, a12);
+      a22 = _mm256_fmadd_pd(wz, qz, a22);
+      b0 = _mm256_fmadd_pd(wx, inv, b0);
+      b1 = _mm256_fmadd_pd(wy, inv, b1);
+      b2 = _mm256_fmadd_pd(wz, inv, b2);
     }
-  } else if (uniform_weight) {
-    SumFourGridRaysAvx2<false, true>(points, width, x0, y0, y1, k, params, rays);
-  } else {
-    SumFourGridRaysAvx2<false, false>(points, width, x0, y0, y1, k, params, rays);
+  }
+  const __m256d all[9] = {a00, a01, a02, a11, a12, a22, b0, b1, b2};
+  for (int i = 0; i < 9; ++i) _mm256_store_pd(lane[i], all[i]);
+  for (int g = 0; g < 4; ++g) {
+    RaySums& r = rays[g];
+    r.a00 = lane[0][g];
+    r.a01 = lane[1][g];
+    r.a02 = lane[2][g];
+    r.a11 = lane[3][g];
+    r.a12 = lane[4][g];
+    r.a22 = lane[5][g];
+    r.b0 = lane[6][g];
+    r.b1 = lane[7][g];
+    r.b2 = lane[8][g];
   }
 }
 #endif
@@ -612,6 +586,11 @@ void SumGridRow(const Eigen::Vector3f* points, int width, int height, int y0, in
   int cx = 0;
 #ifdef PLANESLAM_X86
   if (kernel == SimdKernel::kAvx2) {
+    const bool uniform_weight = params.sigma0 == 0.0;  // RayFitWeight is 1
+    auto* const sum_four_grids =
+        spherical ? (uniform_weight ? &SumFourGridsAvx2<true, true> : &SumFourGridsAvx2<true, false>)
+                  : (uniform_weight ? &SumFourGridsAvx2<false, true>
+                                    : &SumFourGridsAvx2<false, false>);
     // Groups of four whole grids whose loads (16 bytes a point) stay inside the cloud.
     const std::size_t num_points = static_cast<std::size_t>(width) * height;
     for (; cx + 4 <= cells; cx += 4) {
@@ -630,8 +609,8 @@ void SumGridRow(const Eigen::Vector3f* points, int width, int height, int y0, in
         const char* row = reinterpret_cast<const char*>(points + first);
         for (int byte = 0; byte < 12 * 4 * k; byte += 64) __builtin_prefetch(row + byte);
       }
-      SumFourGridsAvx2(points, width, x0, y0, y1, k, spherical, params, sums + cx,
-                       rays != nullptr ? rays + cx : nullptr);
+      sum_four_grids(points, width, x0, y0, y1, k, params, sums + cx,
+                     rays != nullptr ? rays + cx : nullptr);
     }
   }
 #endif
