@@ -710,6 +710,13 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   auto relative_noise = [&](float z) {  // sigma(z) / z
     return s0 == 0.0 ? sigma_z2_f * z : static_cast<float>(params_.Sigma(z) / z);
   };
+  // A plane in best_plane_for_pixel's form: the eigen fit of `m` as n, d in float, appended.
+  auto append_plane_nd = [](const MomentSums& m, std::vector<float>& planes) {
+    const FastFit f = FitSums(m);
+    planes.insert(planes.end(),
+                  {static_cast<float>(f.normal.x()), static_cast<float>(f.normal.y()),
+                   static_cast<float>(f.normal.z()), static_cast<float>(f.d)});
+  };
   auto best_plane_for_pixel = [&](const Eigen::Vector3f& pf, float rel, const float* planes,
                                   int n) {
     int best = -1;
@@ -737,16 +744,9 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     // gamma, which lets growth absorb a large region's gentle bending, would here hand a plane
     // the strip of the adjacent surface along their crease and the mixed pixels of depth edges,
     // which tilt its fit (TUM fr3 k = 1 repeatability, grid4: median angle 0.251 -> 0.236 deg).
-    // Each plane's n, d in float, once (best_plane_for_pixel's form), not per edge grid.
-    ws.plane_nd.resize(4 * num_regions);
-    for (std::size_t i = 0; i < num_regions; ++i) {
-      const FastFit f = FitSums(ws.regions[i]);
-      float* nd = ws.plane_nd.data() + 4 * i;
-      nd[0] = static_cast<float>(f.normal.x());
-      nd[1] = static_cast<float>(f.normal.y());
-      nd[2] = static_cast<float>(f.normal.z());
-      nd[3] = static_cast<float>(f.d);
-    }
+    // Each plane's n, d in float, once, not per edge grid.
+    ws.plane_nd.clear();
+    for (std::size_t i = 0; i < num_regions; ++i) append_plane_nd(ws.regions[i], ws.plane_nd);
     // The moved pixels of one edge grid, in pixel order: (pixel, slot of the candidate plane it
     // goes to, n_adj: none).
     ws.moved_pixels.resize(static_cast<std::size_t>(k) * k);
@@ -908,12 +908,9 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     candidate_grid.clear();
     planes.clear();
     auto add_candidate = [&](int region, int grid, const MomentSums& m) {
-      const FastFit f = FitSums(m);
       candidates.push_back(region);
       candidate_grid.push_back(grid);
-      planes.insert(planes.end(),
-                    {static_cast<float>(f.normal.x()), static_cast<float>(f.normal.y()),
-                     static_cast<float>(f.normal.z()), static_cast<float>(f.d)});
+      append_plane_nd(m, planes);
     };
     add_candidate(r, grids.front(), ws.regions[r]);
     // One walk over the 3 x 3 neighbourhoods of its grids: the planes there (candidates) and the
