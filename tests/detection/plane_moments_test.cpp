@@ -245,6 +245,45 @@ TEST(FastMoments, IncrementalFitEqualsBatchFit) {
   }
 }
 
+TEST(FastMoments, RefitFromPoorlySeparatedSpreadsEqualsBatchFit) {
+  // A young region's points: noise across the plane from 6 to 27 cm against a 0.4 m narrow side,
+  // so l1 / l2 from 0.02 to 0.45 (beyond the plain power iteration's reach), refitted from
+  // normals up to 30 deg off, and from one in the plane (the answer's second eigenvector).
+  for (const double noise : {0.06, 0.1, 0.15, 0.2, 0.27}) {
+    const auto pts = NoisyPlanePoints(300, 9, noise, Eigen::Vector3d(0.3, -0.2, 1.0), 2.5);
+    MomentSums sums;
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const auto& p : pts) {
+      sums.Add(p.x(), p.y(), p.z(), 0.0);
+      mean += p;
+    }
+    mean /= static_cast<double>(pts.size());
+    Eigen::Matrix3d c = Eigen::Matrix3d::Zero();
+    for (const auto& p : pts) c += (p - mean) * (p - mean).transpose();
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(c);
+    Eigen::Vector3d n = es.eigenvectors().col(0);
+    if (n.dot(mean) < 0) n = -n;
+    const double ratio = es.eigenvalues()(0) / es.eigenvalues()(1);
+    ASSERT_GT(ratio, 0.015) << noise;
+    ASSERT_LT(ratio, 0.5) << noise;
+    std::vector<Eigen::Vector3d> starts = {es.eigenvectors().col(1)};
+    const Eigen::Vector3d axis = n.unitOrthogonal();
+    for (const double deg : {0.0, 1.0, 5.0, 15.0, 30.0}) {
+      starts.push_back(Eigen::AngleAxisd(deg * M_PI / 180.0, axis) * n);
+    }
+    for (std::size_t i = 0; i < starts.size(); ++i) {
+      SCOPED_TRACE(::testing::Message() << "noise " << noise << " l1/l2 " << ratio << " start "
+                                        << i);
+      const FastFit r = RefitFrom(sums, starts[i]);
+      EXPECT_NEAR(r.normal.dot(n), 1.0, 1e-12);
+      EXPECT_NEAR(r.d, n.dot(mean), 1e-9);
+      EXPECT_NEAR(r.l1, es.eigenvalues()(0), 1e-9 * es.eigenvalues()(2));
+      EXPECT_NEAR(r.l2, es.eigenvalues()(1), 1e-9 * es.eigenvalues()(2));
+      EXPECT_NEAR(r.l3, es.eigenvalues()(2), 1e-9 * es.eigenvalues()(2));
+    }
+  }
+}
+
 TEST(FastMoments, PixelBlockSumsEqualPointByPointSums) {
   // A 7 x 5 block inside an 11 x 6 organized cloud: points 0.5-5 m away, some without depth (NaN),
   // some behind a scanner's origin (z < 0, range > 0).
