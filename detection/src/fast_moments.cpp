@@ -129,37 +129,72 @@ bool SymEigenvaluesNewton(const double c[6], double relative_tolerance, double& 
   return l1 <= l2 && l2 <= l3;
 }
 
+/// One matrix of SymEigenvaluesNewtonBatch: SymEigenvaluesNewton with every lane taking all steps
+/// (once converged a step is ~0, and the steps shrink monotonically, so "the last step is small"
+/// is "some step was small"). Flags are doubles (1 or 0) selected like the values, not branches:
+/// SSE2 vectorises that.
+struct NewtonLane {
+  CharacteristicPolynomial q;
+  double l = 0.0, step = 0.0, good = 1.0;
+};
+__attribute__((always_inline)) inline NewtonLane StartNewtonLane(double c00, double c01,
+                                                                 double c02, double c11,
+                                                                 double c12, double c22) {
+  NewtonLane a;
+  a.q = Characteristic(c00, c01, c02, c11, c12, c22);
+  a.good = (a.q.t > 0) ? 1.0 : 0.0;
+  a.good = (a.q.m > 0) ? a.good : 0.0;
+  a.good = (a.q.det >= 0) ? a.good : 0.0;
+  return a;
+}
+__attribute__((always_inline)) inline void NewtonLaneStep(NewtonLane& a) {
+  double slope;
+  a.step = NewtonStep(a.q, a.l, slope);
+  a.good = (slope > 0) ? a.good : 0.0;
+  a.l += a.step;
+}
+__attribute__((always_inline)) inline void FinishNewtonLane(NewtonLane a,
+                                                            double relative_tolerance,
+                                                            double& l1, double& l2, double& l3,
+                                                            double& ok) {
+  a.good = (std::abs(a.step) <= relative_tolerance * a.q.t) ? a.good : 0.0;
+  double mid, hi;
+  UpperEigenvalues(a.q, a.l, mid, hi);
+  l1 = a.l;
+  l2 = mid;
+  l3 = hi;
+  a.good = (a.l <= mid) ? a.good : 0.0;
+  ok = (mid <= hi) ? a.good : 0.0;
+}
+
 /// The loop of SymEigenvaluesNewtonBatch. Restrict parameters (distinct arrays) let the compiler
 /// vectorise it without run-time overlap checks. Inlined into one copy per instruction set.
+/// Matrices i and i + n/2 step side by side: each step waits on a division, and two independent
+/// chains keep the divider busy (GBRG's eigenvalues and eigenvectors on TUM frames, 3x3 grids:
+/// 0.99 -> 0.83 ms a frame).
 __attribute__((always_inline)) inline void NewtonBatchLoop(
     const double* __restrict c0, const double* __restrict c1, const double* __restrict c2,
     const double* __restrict c3, const double* __restrict c4, const double* __restrict c5, int n,
     double relative_tolerance, double* __restrict out1, double* __restrict out2,
     double* __restrict out3, double* __restrict out_ok) {
-  for (int i = 0; i < n; ++i) {
-    // SymEigenvaluesNewton with every lane taking all steps: once converged a step is ~0, and the
-    // steps shrink monotonically, so "the last step is small" is "some step was small". Flags are
-    // doubles (1 or 0) selected like the values, not branches: SSE2 vectorises that.
-    const CharacteristicPolynomial q = Characteristic(c0[i], c1[i], c2[i], c3[i], c4[i], c5[i]);
-    double good = (q.t > 0) ? 1.0 : 0.0;
-    good = (q.m > 0) ? good : 0.0;
-    good = (q.det >= 0) ? good : 0.0;
-    double l = 0.0, step = 0.0;
+  const int half = n / 2;
+  for (int i = 0; i < half; ++i) {
+    const int j = i + half;
+    NewtonLane a = StartNewtonLane(c0[i], c1[i], c2[i], c3[i], c4[i], c5[i]);
+    NewtonLane b = StartNewtonLane(c0[j], c1[j], c2[j], c3[j], c4[j], c5[j]);
 #pragma GCC unroll 8
     for (int it = 0; it < kNewtonSteps; ++it) {
-      double slope;
-      step = NewtonStep(q, l, slope);
-      good = (slope > 0) ? good : 0.0;
-      l += step;
+      NewtonLaneStep(a);
+      NewtonLaneStep(b);
     }
-    good = (std::abs(step) <= relative_tolerance * q.t) ? good : 0.0;
-    double mid, hi;
-    UpperEigenvalues(q, l, mid, hi);
-    out1[i] = l;
-    out2[i] = mid;
-    out3[i] = hi;
-    good = (l <= mid) ? good : 0.0;
-    out_ok[i] = (mid <= hi) ? good : 0.0;
+    FinishNewtonLane(a, relative_tolerance, out1[i], out2[i], out3[i], out_ok[i]);
+    FinishNewtonLane(b, relative_tolerance, out1[j], out2[j], out3[j], out_ok[j]);
+  }
+  if (n % 2 == 1) {  // the last matrix alone
+    const int i = n - 1;
+    NewtonLane a = StartNewtonLane(c0[i], c1[i], c2[i], c3[i], c4[i], c5[i]);
+    for (int it = 0; it < kNewtonSteps; ++it) NewtonLaneStep(a);
+    FinishNewtonLane(a, relative_tolerance, out1[i], out2[i], out3[i], out_ok[i]);
   }
 }
 

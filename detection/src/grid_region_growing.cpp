@@ -218,7 +218,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       }
       // A grid's eigenvalues feed thresholds and a float seed key: Newton's last step below 1e-9 of
       // the trace is plenty (a grid whose normal is read refines l1 as its Rayleigh quotient
-      // anyway). Lanes where it is not reached in six steps (l1 close to l2) use the closed form.
+      // anyway). Lanes where it is not reached in eight steps (l1 close to l2) use the closed form.
       const double* columns[6];
       for (int i = 0; i < 6; ++i) columns[i] = ws.scatter[i].data();
       SymEigenvaluesNewtonBatch(columns, num_dense, 1e-9, ws.l1.data(), ws.l2.data(), ws.l3.data(),
