@@ -453,8 +453,9 @@ void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
     id_of[static_cast<std::size_t>(r) + 1] = p.id;
     out.planes.push_back(std::move(p));
   }
-  out.labels.resize(region_labels.size());
-  MapLabels(id_of.data(), region_labels.data(), out.labels.data(), region_labels.size());
+  // Rewritten in place and handed over: no second image to allocate and fill with zeros first.
+  MapLabels(id_of.data(), region_labels.data(), region_labels.data(), region_labels.size());
+  out.labels.swap(region_labels);
 }
 
 void FinalizeLabelImage(const datasets::OrganizedCloud& cloud, std::vector<std::int32_t>& labels,

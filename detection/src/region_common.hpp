@@ -61,7 +61,8 @@ void MergeCoplanarRegions(std::vector<std::int32_t>& labels,
                           const DetectionParams& params);
 
 /// Builds the output: one Plane per region with k >= 3 (sorted by point count descending, then by
-/// region index), labels rewritten to plane ids (>= 1) or -1, covariance from the region noise.
+/// region index), covariance from the region noise, and `region_labels` rewritten to plane ids
+/// (>= 1) or -1 and moved to out.labels (it is left holding out.labels' former contents).
 /// The plane is the eigen fit of the region's moments, or with params.ray_fit the inverse-depth
 /// fit of its ray sums `rays` (the eigen fit where that is degenerate).
 /// The ray fit also lets the pixels of `border_pixels` change region at a crease, updating
