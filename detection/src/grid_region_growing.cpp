@@ -774,6 +774,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
           const std::size_t row = static_cast<std::size_t>(y) * width;
           __builtin_prefetch(pts + row + ax * k);
           __builtin_prefetch(pts + row + ax1);
+          __builtin_prefetch(ws.labels.data() + row + ax * k, 1);  // written below
         }
       }
       const auto [cx, cy] = grid_xy(c);
