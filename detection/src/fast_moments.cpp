@@ -344,6 +344,33 @@ SymEigen3 SymEigen3Smallest(const double c[6]) {
   return e;
 }
 
+namespace {
+
+/// The adjugate of C - shift I for a symmetric C (upper triangle c): its cofactors, symmetric as
+/// well. adj(C - s I) = det(C - s I) (C - s I)^-1 without a division, so it stays defined when
+/// C - s I is singular (exactly planar points, or s an eigenvalue): RefitFrom's power iteration.
+struct SymAdjugate {
+  double a00, a01, a02, a11, a12, a22;
+  SymAdjugate(const double c[6], double shift) {
+    const double d0 = c[0] - shift, d3 = c[3] - shift, d5 = c[5] - shift;
+    a00 = d3 * d5 - c[4] * c[4];
+    a01 = c[2] * c[4] - c[1] * d5;
+    a02 = c[1] * c[4] - c[2] * d3;
+    a11 = d0 * d5 - c[2] * c[2];
+    a12 = c[1] * c[2] - d0 * c[4];
+    a22 = d0 * d3 - c[1] * c[1];
+  }
+  Eigen::Vector3d operator*(const Eigen::Vector3d& x) const {
+    return Eigen::Vector3d(a00 * x.x() + a01 * x.y() + a02 * x.z(),
+                           a01 * x.x() + a11 * x.y() + a12 * x.z(),
+                           a02 * x.x() + a12 * x.y() + a22 * x.z());
+  }
+  /// The sum of C - s I's principal 2x2 minors (for s = 0, l1 l2 + l1 l3 + l2 l3).
+  double Trace() const { return a00 + a11 + a22; }
+};
+
+}  // namespace
+
 FastFit FitSums(const MomentSums& m) {
   FastFit f;
   if (m.k <= 0) return f;
@@ -371,27 +398,19 @@ FastFit RefitFrom(const MomentSums& m, const Eigen::Vector3d& n0) {
   if (m.k < 3) return FitSums(m);
   double c[6];
   m.Scatter(c);
-  // Adjugate of the symmetric C (cofactors), also symmetric.
-  const double a00 = c[3] * c[5] - c[4] * c[4], a01 = c[2] * c[4] - c[1] * c[5],
-               a02 = c[1] * c[4] - c[2] * c[3], a11 = c[0] * c[5] - c[2] * c[2],
-               a12 = c[1] * c[2] - c[0] * c[4], a22 = c[0] * c[3] - c[1] * c[1];
-  Eigen::Vector3d x = n0;
-  for (int it = 0; it < 2; ++it) {
-    x = Eigen::Vector3d(a00 * x.x() + a01 * x.y() + a02 * x.z(),
-                        a01 * x.x() + a11 * x.y() + a12 * x.z(),
-                        a02 * x.x() + a12 * x.y() + a22 * x.z());
-  }
+  const SymAdjugate adj(c, 0.0);
+  const Eigen::Vector3d x0 = adj * (adj * n0);
   // Normalised once: adj C scales as C^2, so two steps stay far inside double range for any
   // point spread between 0.1 mm and kilometres.
-  const double norm2 = x.squaredNorm();
+  const double norm2 = x0.squaredNorm();
   if (!(norm2 > 1e-300) || !std::isfinite(norm2)) return FitSums(m);
-  x /= std::sqrt(norm2);
+  Eigen::Vector3d x = x0 / std::sqrt(norm2);
   auto rayleigh = [&c](const Eigen::Vector3d& v) {
     return std::max(0.0, c[0] * v.x() * v.x() + c[3] * v.y() * v.y() + c[5] * v.z() * v.z() +
                              2.0 * (c[1] * v.x() * v.y() + c[2] * v.x() * v.z() +
                                     c[4] * v.y() * v.z()));
   };
-  const double e2 = a00 + a11 + a22;  // l1 l2 + l1 l3 + l2 l3
+  const double e2 = adj.Trace();  // l1 l2 + l1 l3 + l2 l3
   double l1 = 0, l2 = 0, l3 = 0;
   // l2 and l3 from l1 (the Rayleigh quotient of x), the trace and the second invariant.
   auto eigenvalues_from = [&](const Eigen::Vector3d& v) {
@@ -411,13 +430,7 @@ FastFit RefitFrom(const MomentSums& m, const Eigen::Vector3d& n0) {
     // or the plane is barely defined) the closed form decides. This path replaced the closed
     // form for 80 % of GBRG's refits on TUM frames.
     for (int it = 0; it < 2; ++it) {
-      const double d0 = c[0] - l1, d3 = c[3] - l1, d5 = c[5] - l1;
-      const double b00 = d3 * d5 - c[4] * c[4], b01 = c[2] * c[4] - c[1] * d5,
-                   b02 = c[1] * c[4] - c[2] * d3, b11 = d0 * d5 - c[2] * c[2],
-                   b12 = c[1] * c[2] - d0 * c[4], b22 = d0 * d3 - c[1] * c[1];
-      x = Eigen::Vector3d(b00 * x.x() + b01 * x.y() + b02 * x.z(),
-                          b01 * x.x() + b11 * x.y() + b12 * x.z(),
-                          b02 * x.x() + b12 * x.y() + b22 * x.z());
+      x = SymAdjugate(c, l1) * x;
       const double shifted_norm2 = x.squaredNorm();
       if (!(shifted_norm2 > 1e-300) || !std::isfinite(shifted_norm2)) return FitSums(m);
       x /= std::sqrt(shifted_norm2);
