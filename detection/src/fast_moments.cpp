@@ -137,9 +137,9 @@ struct NewtonLane {
   CharacteristicPolynomial q;
   double l = 0.0, step = 0.0, good = 1.0;
 };
-__attribute__((always_inline)) inline NewtonLane StartNewtonLane(double c00, double c01,
-                                                                 double c02, double c11,
-                                                                 double c12, double c22) {
+__attribute__((always_inline)) inline NewtonLane StartNewtonLane(double c00, double c01, double c02,
+                                                                 double c11, double c12,
+                                                                 double c22) {
   NewtonLane a;
   a.q = Characteristic(c00, c01, c02, c11, c12, c22);
   a.good = (a.q.t > 0) ? 1.0 : 0.0;
@@ -153,8 +153,7 @@ __attribute__((always_inline)) inline void NewtonLaneStep(NewtonLane& a) {
   a.good = (slope > 0) ? a.good : 0.0;
   a.l += a.step;
 }
-__attribute__((always_inline)) inline void FinishNewtonLane(NewtonLane a,
-                                                            double relative_tolerance,
+__attribute__((always_inline)) inline void FinishNewtonLane(NewtonLane a, double relative_tolerance,
                                                             double& l1, double& l2, double& l3,
                                                             double& ok) {
   a.good = (std::abs(a.step) <= relative_tolerance * a.q.t) ? a.good : 0.0;
@@ -406,9 +405,9 @@ FastFit RefitFrom(const MomentSums& m, const Eigen::Vector3d& n0) {
   if (!(norm2 > 1e-300) || !std::isfinite(norm2)) return FitSums(m);
   Eigen::Vector3d x = x0 / std::sqrt(norm2);
   auto rayleigh = [&c](const Eigen::Vector3d& v) {
-    return std::max(0.0, c[0] * v.x() * v.x() + c[3] * v.y() * v.y() + c[5] * v.z() * v.z() +
-                             2.0 * (c[1] * v.x() * v.y() + c[2] * v.x() * v.z() +
-                                    c[4] * v.y() * v.z()));
+    return std::max(0.0,
+                    c[0] * v.x() * v.x() + c[3] * v.y() * v.y() + c[5] * v.z() * v.z() +
+                        2.0 * (c[1] * v.x() * v.y() + c[2] * v.x() * v.z() + c[4] * v.y() * v.z()));
   };
   const double e2 = adj.Trace();  // l1 l2 + l1 l3 + l2 l3
   double l1 = 0, l2 = 0, l3 = 0;
@@ -610,8 +609,8 @@ __attribute__((target("avx2,fma"))) void SumFourGridsAvx2(const Eigen::Vector3f*
 #ifdef PLANESLAM_X86
 namespace {
 __attribute__((target("avx2"))) std::size_t MapLabelsAvx2(const std::int32_t* shifted_table,
-                                                           const std::int32_t* in,
-                                                           std::int32_t* out, std::size_t n) {
+                                                          const std::int32_t* in, std::int32_t* out,
+                                                          std::size_t n) {
   const __m256i one = _mm256_set1_epi32(1);
   std::size_t i = 0;
   for (; i + 8 <= n; i += 8) {
@@ -669,9 +668,9 @@ void SumGridRow(const Eigen::Vector3f* points, int width, int height, int y0, in
   if (kernel == SimdKernel::kAvx2) {
     const bool uniform_weight = params.sigma0 == 0.0;  // RayFitWeight is 1
     auto* const sum_four_grids =
-        spherical ? (uniform_weight ? &SumFourGridsAvx2<true, true> : &SumFourGridsAvx2<true, false>)
-                  : (uniform_weight ? &SumFourGridsAvx2<false, true>
-                                    : &SumFourGridsAvx2<false, false>);
+        spherical
+            ? (uniform_weight ? &SumFourGridsAvx2<true, true> : &SumFourGridsAvx2<true, false>)
+            : (uniform_weight ? &SumFourGridsAvx2<false, true> : &SumFourGridsAvx2<false, false>);
     // Groups of four whole grids whose loads (16 bytes a point) stay inside the cloud.
     const std::size_t num_points = static_cast<std::size_t>(width) * height;
     for (; cx + 4 <= cells; cx += 4) {

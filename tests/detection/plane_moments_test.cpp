@@ -272,8 +272,8 @@ TEST(FastMoments, RefitFromPoorlySeparatedSpreadsEqualsBatchFit) {
       starts.push_back(Eigen::AngleAxisd(deg * M_PI / 180.0, axis) * n);
     }
     for (std::size_t i = 0; i < starts.size(); ++i) {
-      SCOPED_TRACE(::testing::Message() << "noise " << noise << " l1/l2 " << ratio << " start "
-                                        << i);
+      SCOPED_TRACE(::testing::Message()
+                   << "noise " << noise << " l1/l2 " << ratio << " start " << i);
       const FastFit r = RefitFrom(sums, starts[i]);
       EXPECT_NEAR(r.normal.dot(n), 1.0, 1e-12);
       EXPECT_NEAR(r.d, n.dot(mean), 1e-9);
