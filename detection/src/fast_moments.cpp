@@ -15,22 +15,6 @@
 
 namespace planeslam::detection {
 
-void MomentSums::Scatter(double c[6]) const {
-  if (k <= 0) {
-    for (int i = 0; i < 6; ++i) c[i] = 0.0;
-    return;
-  }
-  const double inv = 1.0 / k;
-  const double mx = sx * inv, my = sy * inv, mz = sz * inv;
-  // Eq. (6): C = Q - S m^T.
-  c[0] = xx - sx * mx;
-  c[1] = xy - sx * my;
-  c[2] = xz - sx * mz;
-  c[3] = yy - sy * my;
-  c[4] = yz - sy * mz;
-  c[5] = zz - sz * mz;
-}
-
 PlaneMoments MomentSums::ToPlaneMoments() const {
   Eigen::Matrix3d q;
   q << xx, xy, xz, xy, yy, yz, xz, yz, zz;

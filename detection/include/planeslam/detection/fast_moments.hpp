@@ -142,8 +142,23 @@ struct MomentSums {
           2.0 * (xy * n.x() * n.y() + xz * n.x() * n.z() + yz * n.y() * n.z());
     ns = sx * n.x() + sy * n.y() + sz * n.z();
   }
-  /// C = Q - S m^T (eq. 6) as the upper triangle {c00, c01, c02, c11, c12, c22}.
-  void Scatter(double c[6]) const;
+  /// C = Q - S m^T (eq. 6) as the upper triangle {c00, c01, c02, c11, c12, c22}. Inline: GBRG
+  /// takes it of every grid.
+  void Scatter(double c[6]) const {
+    if (k <= 0) {
+      for (int i = 0; i < 6; ++i) c[i] = 0.0;
+      return;
+    }
+    const double inv = 1.0 / k;
+    const double mx = sx * inv, my = sy * inv, mz = sz * inv;
+    // Eq. (6): C = Q - S m^T.
+    c[0] = xx - sx * mx;
+    c[1] = xy - sx * my;
+    c[2] = xz - sx * mz;
+    c[3] = yy - sy * my;
+    c[4] = yz - sy * mz;
+    c[5] = zz - sz * mz;
+  }
   /// The same statistics as a PlaneMoments (reference point = origin).
   PlaneMoments ToPlaneMoments() const;
 };
