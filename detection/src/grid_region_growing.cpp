@@ -701,7 +701,10 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // Region ray sums from their grids' (the refinement below corrects them pixel by pixel).
   ws.rays.assign(params_.ray_fit ? num_regions : 0, RaySums());
   if (params_.ray_fit) {
+    // The grids' ray sums (2.4 MB for 3x3 grids) left the cache since the moments pass: fetched
+    // 1 kB ahead, which the hardware prefetcher alone did not keep up with (0.29 -> 0.23 ms).
     for (int c = 0; c < num_cells; ++c) {
+      __builtin_prefetch(reinterpret_cast<const char*>(ws.grid_rays.data() + c) + 1024);
       if (ws.cell_region[c] >= 0) ws.rays[ws.cell_region[c]].Add(ws.grid_rays[c]);
     }
   }
