@@ -219,30 +219,6 @@ void RegionBorderScan::Add(std::size_t i, std::int32_t r, std::size_t j) {
   last_pair_ = key;
 }
 
-void RegionBorderScan::Scan(int x0, int y0, int x1, int y1) {
-  const auto w = static_cast<std::size_t>(width_);
-  const std::int32_t* labels = labels_.data();
-  for (int y = y0; y < y1; ++y) {
-    for (int x = x0; x < x1; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * w + x;
-      const std::int32_t r = labels[i];
-      if (r < 0) continue;
-      const std::int32_t left = x > 0 ? labels[i - 1] : r;
-      const std::int32_t right = x + 1 < width_ ? labels[i + 1] : r;
-      const std::int32_t up = y > 0 ? labels[i - w] : r;
-      const std::int32_t down = y + 1 < height_ ? labels[i + w] : r;
-      auto other = [r](std::int32_t o) { return (o >= 0) & (o != r); };
-      // Most pixels, even in the grids scanned, have no other region around: one branch for the
-      // four neighbours, taken the same way along a region's interior.
-      if (!(other(left) | other(right) | other(up) | other(down))) continue;
-      if (other(left)) Add(i, r, i - 1);
-      if (other(right)) Add(i, r, i + 1);
-      if (other(up)) Add(i, r, i - w);
-      if (other(down)) Add(i, r, i + w);
-    }
-  }
-}
-
 RegionBorders RegionBorderScan::Finish() {
   std::sort(borders_.pairs.begin(), borders_.pairs.end());
   borders_.pairs.erase(std::unique(borders_.pairs.begin(), borders_.pairs.end()),
