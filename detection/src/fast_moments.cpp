@@ -489,8 +489,9 @@ __attribute__((target("avx2,fma"))) void SumFourGridsAvx2(const Eigen::Vector3f*
                                                           const DetectionParams& params,
                                                           MomentSums* sums, RaySums* rays) {
   static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float), "points are packed float triples");
-  static_assert(std::is_standard_layout_v<MomentSums> && sizeof(MomentSums) == 16 * sizeof(double) &&
-                    offsetof(MomentSums, k) == 0 && offsetof(MomentSums, zz) == 9 * sizeof(double),
+  static_assert(std::is_standard_layout_v<MomentSums> &&
+                    sizeof(MomentSums) == 16 * sizeof(double) && offsetof(MomentSums, k) == 0 &&
+                    offsetof(MomentSums, zz) == 9 * sizeof(double),
                 "grid sums are stored as 16 doubles, k first, then S, Q, W");
   static_assert(std::is_standard_layout_v<RaySums> && sizeof(RaySums) == 9 * sizeof(double) &&
                     offsetof(RaySums, a00) == 0 && offsetof(RaySums, b2) == 8 * sizeof(double),
