@@ -100,6 +100,7 @@ struct Workspace {
   std::vector<std::pair<std::size_t, int>> pixel_overrides;
   std::vector<std::int32_t> grid_ids;  ///< each grid's plane id (pixel labels = their grid's)
   std::vector<std::pair<int, int>> grid_moves;  ///< (grid, region) of the grid-level refinement
+  std::vector<std::int32_t> label_root;  ///< the merge's label -> region map (pixel labels)
   std::vector<std::int32_t> candidate_stamp;    ///< per region (+1): last edge grid it was seen at
 };
 
@@ -911,8 +912,12 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     }
     borders = scan.Finish();
   }
+  ws.label_root.clear();
   if (params_.merge_regions) {
-    internal::MergeCoplanarRegions(region_image, borders.pairs, ws.regions, ws.rays, params_);
+    // A pixel image's relabelling waits for the plane ids (one pass for both); a grid image, which
+    // the narrow planes below read, is relabelled now.
+    internal::MergeCoplanarRegions(region_image, borders.pairs, ws.regions, ws.rays, params_,
+                                   grid_labels ? nullptr : &ws.label_root);
   }
   // A plane too narrow for its grids apart from the other planes as well (a column of grids or
   // two, each next to another plane) holds another surface's pixels in most of its grids: fitted
@@ -1122,7 +1127,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   internal::FinalizeSegmentation(
       cloud, region_image, ws.regions, ws.rays, borders.pixels, params_, out,
       grid_labels ? (interior_fit ? &ws.fit_sums : &ws.regions) : nullptr,
-      grid_labels ? (interior_fit ? &ws.fit_rays : &ws.rays) : nullptr);
+      grid_labels ? (interior_fit ? &ws.fit_rays : &ws.rays) : nullptr, ws.label_root);
   if (grid_labels) {  // out.labels holds each grid's plane id: expand it to the pixels
     ws.grid_ids.swap(out.labels);
     expand_to_pixels(ws.grid_ids.data(), out.labels);

@@ -104,7 +104,8 @@ bool VisibleHere(const Eigen::Vector3f& p, double s, const RayPlane& own, const 
 /// plane describes its final pixels.
 std::vector<RayPlane> FitAlongRays(const datasets::OrganizedCloud& cloud,
                                    std::vector<std::int32_t>& labels,
-                                   std::vector<MomentSums>& regions, std::vector<RaySums>& sums,
+                                   const std::int32_t* label_root, std::vector<MomentSums>& regions,
+                                   std::vector<RaySums>& sums,
                                    const std::vector<std::size_t>& border_pixels,
                                    const DetectionParams& params) {
   constexpr int kCreasePasses = 3;
@@ -123,10 +124,13 @@ std::vector<RayPlane> FitAlongRays(const datasets::OrganizedCloud& cloud,
   };
   std::vector<RayPlane> planes(regions.size());
   for (std::size_t r = 0; r < regions.size(); ++r) planes[r] = SolveRegion(sums[r], regions[r]);
+  // A label's region: through label_root (shifted by one, so that -1 maps to -1) after a merge
+  // that left the labels as they were. A region a pixel moves to is a root: it maps to itself.
+  auto region_of = [&](std::size_t i) { return label_root[labels[i] + 1]; };
 
   // Pixel i's region after this pass (its own when it stays).
   auto competitor = [&](std::size_t i) -> std::int32_t {
-    const std::int32_t r = labels[i];
+    const std::int32_t r = region_of(i);
     if (r < 0 || !planes[r].ok) return r;
     // A point behind the sensor (possible in a PCD) never entered the ray sums: it stays.
     const double s = PointDepth(cloud.points[i], spherical);
@@ -135,9 +139,9 @@ std::vector<RayPlane> FitAlongRays(const datasets::OrganizedCloud& cloud,
     // 0.5 / width from an integer, far beyond the product's rounding.
     const int y = static_cast<int>((static_cast<double>(i) + 0.5) * inv_width);
     const int x = static_cast<int>(i) - y * width;
-    const std::int32_t around[4] = {x > 0 ? labels[i - 1] : -1, x + 1 < width ? labels[i + 1] : -1,
-                                    y > 0 ? labels[i - width] : -1,
-                                    y + 1 < height ? labels[i + width] : -1};
+    const std::int32_t around[4] = {
+        x > 0 ? region_of(i - 1) : -1, x + 1 < width ? region_of(i + 1) : -1,
+        y > 0 ? region_of(i - width) : -1, y + 1 < height ? region_of(i + width) : -1};
     for (int a = 0; a < 4; ++a) {
       const std::int32_t other = around[a];
       if (other < 0 || other == r || !planes[other].ok) continue;
@@ -168,11 +172,11 @@ std::vector<RayPlane> FitAlongRays(const datasets::OrganizedCloud& cloud,
       }
       queued[i] = 0;
       const std::int32_t to = competitor(i);
-      if (to != labels[i]) moves.emplace_back(i, to);
+      if (to != region_of(i)) moves.emplace_back(i, to);
     }
     candidates.clear();
     for (const auto& [i, to] : moves) {
-      const std::int32_t from = labels[i];
+      const std::int32_t from = region_of(i);
       const Eigen::Vector3f& p = cloud.points[i];
       const float s = PointDepth(p, spherical);
       MomentSums point;
@@ -286,7 +290,8 @@ RegionBorders ScanLabelImage(const datasets::OrganizedCloud& cloud,
 void MergeCoplanarRegions(std::vector<std::int32_t>& labels,
                           const std::vector<std::uint64_t>& touching_pairs,
                           std::vector<MomentSums>& regions, std::vector<RaySums>& rays,
-                          const DetectionParams& params) {
+                          const DetectionParams& params, std::vector<std::int32_t>* label_root) {
+  if (label_root != nullptr) label_root->clear();
   const int n = static_cast<int>(regions.size());
   if (n < 2) return;
   const std::vector<std::uint64_t>& pairs = touching_pairs;
@@ -364,7 +369,11 @@ void MergeCoplanarRegions(std::vector<std::int32_t>& labels,
   // to itself without a branch.
   std::vector<std::int32_t> root(static_cast<std::size_t>(n) + 1, -1);
   for (int i = 0; i < n; ++i) root[static_cast<std::size_t>(i) + 1] = Find(parent, i);
-  MapLabels(root.data(), labels.data(), labels.data(), labels.size());
+  if (label_root != nullptr) {
+    label_root->swap(root);
+  } else {
+    MapLabels(root.data(), labels.data(), labels.data(), labels.size());
+  }
 }
 
 void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
@@ -373,10 +382,19 @@ void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
                           const std::vector<std::size_t>& border_pixels,
                           const DetectionParams& params, Segmentation& out,
                           const std::vector<MomentSums>* fit_sums,
-                          const std::vector<RaySums>* fit_rays) {
+                          const std::vector<RaySums>* fit_rays,
+                          const std::vector<std::int32_t>& label_root) {
   out.width = cloud.width;
   out.height = cloud.height;
   const int n = static_cast<int>(regions.size());
+  PLANESLAM_CHECK(label_root.empty() || label_root.size() == regions.size() + 1,
+                  "finalize: a label map of one entry per region and -1 expected");
+  // Each label's region (shifted by one: -1 maps to -1): label_root, or the identity.
+  std::vector<std::int32_t> root = label_root;
+  if (root.empty()) {
+    root.resize(static_cast<std::size_t>(n) + 1);
+    std::iota(root.begin(), root.end(), -1);
+  }
   PLANESLAM_CHECK(
       fit_sums == nullptr ||
           (fit_sums->size() == regions.size() &&
@@ -389,7 +407,8 @@ void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
       ray_planes[r] = SolveRegion((*fit_rays)[r], (*fit_sums)[r]);
     }
   } else if (params.ray_fit) {
-    ray_planes = FitAlongRays(cloud, region_labels, regions, rays, border_pixels, params);
+    ray_planes =
+        FitAlongRays(cloud, region_labels, root.data(), regions, rays, border_pixels, params);
   }
   std::vector<int> order;
   order.reserve(n);
@@ -430,7 +449,9 @@ void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
     out.planes.push_back(std::move(p));
   }
   // Rewritten in place and handed over: no second image to allocate and fill with zeros first.
-  MapLabels(id_of.data(), region_labels.data(), region_labels.data(), region_labels.size());
+  // One pass for both maps: label -> region -> plane id.
+  for (std::int32_t& entry : root) entry = id_of[static_cast<std::size_t>(entry + 1)];
+  MapLabels(root.data(), region_labels.data(), region_labels.data(), region_labels.size());
   out.labels.swap(region_labels);
 }
 
@@ -444,8 +465,12 @@ void FinalizeLabelImage(const datasets::OrganizedCloud& cloud, std::vector<std::
     borders =
         ScanLabelImage(cloud, labels, regions.size(), params, params.ray_fit ? &rays : nullptr);
   }
-  if (params.merge_regions) MergeCoplanarRegions(labels, borders.pairs, regions, rays, params);
-  FinalizeSegmentation(cloud, labels, regions, rays, borders.pixels, params, out);
+  std::vector<std::int32_t> label_root;  // the merge's, applied with the plane ids
+  if (params.merge_regions) {
+    MergeCoplanarRegions(labels, borders.pairs, regions, rays, params, &label_root);
+  }
+  FinalizeSegmentation(cloud, labels, regions, rays, borders.pixels, params, out, nullptr, nullptr,
+                       label_root);
 }
 
 }  // namespace planeslam::detection::internal

@@ -87,11 +87,15 @@ RegionBorders ScanLabelImage(const datasets::OrganizedCloud& cloud,
 /// Pairs are tried in order of increasing union MSE (deterministic; ties by region indices); a
 /// merged region keeps the smaller index. `labels` holds region indices (-1 none) and is
 /// rewritten; merged-away regions get k = 0 in `regions`, and their ray sums (when `rays` is
-/// not empty) move with their moments.
+/// not empty) move with their moments. With `label_root`, `labels` is left as it is and the map
+/// from a label l to its merged region, (*label_root)[l + 1], is written there instead (empty
+/// when nothing merged), for FinalizeSegmentation, which rewrites every label anyway: a pass over
+/// a pixel image less (a relabelling of 640 x 480 labels took 0.38 ms on TUM frames).
 void MergeCoplanarRegions(std::vector<std::int32_t>& labels,
                           const std::vector<std::uint64_t>& touching_pairs,
                           std::vector<MomentSums>& regions, std::vector<RaySums>& rays,
-                          const DetectionParams& params);
+                          const DetectionParams& params,
+                          std::vector<std::int32_t>* label_root = nullptr);
 
 /// Builds the output: one Plane per region with k >= 3 (sorted by point count descending, then by
 /// region index), covariance from the region noise, and `region_labels` rewritten to plane ids
@@ -105,13 +109,16 @@ void MergeCoplanarRegions(std::vector<std::int32_t>& labels,
 /// the rays from `fit_rays` with params.ray_fit, and no pixel changes region at a crease;
 /// `region_labels` may then be an image of grids, and `border_pixels` is not used. `fit_sums` may
 /// be `&regions` (and `fit_rays` `&rays`): every point is fitted, with no second eigen fit.
+/// `label_root` (from MergeCoplanarRegions; empty: none) maps each label of `region_labels` to
+/// its region first.
 void FinalizeSegmentation(const datasets::OrganizedCloud& cloud,
                           std::vector<std::int32_t>& region_labels,
                           std::vector<MomentSums>& regions, std::vector<RaySums>& rays,
                           const std::vector<std::size_t>& border_pixels,
                           const DetectionParams& params, Segmentation& out,
                           const std::vector<MomentSums>* fit_sums = nullptr,
-                          const std::vector<RaySums>* fit_rays = nullptr);
+                          const std::vector<RaySums>* fit_rays = nullptr,
+                          const std::vector<std::int32_t>& label_root = {});
 
 /// The whole of what follows growth for a grower that has only a region-index image (PBRG):
 /// ScanLabelImage, then MergeCoplanarRegions (params.merge_regions), then FinalizeSegmentation.
