@@ -100,7 +100,7 @@ struct Workspace {
   std::vector<std::pair<std::size_t, int>> pixel_overrides;
   std::vector<std::int32_t> grid_ids;  ///< each grid's plane id (pixel labels = their grid's)
   std::vector<std::pair<int, int>> grid_moves;  ///< (grid, region) of the grid-level refinement
-  std::vector<std::int32_t> label_root;  ///< the merge's label -> region map (pixel labels)
+  std::vector<std::int32_t> label_root;         ///< the merge's label -> region map (pixel labels)
   std::vector<std::int32_t> candidate_stamp;    ///< per region (+1): last edge grid it was seen at
 };
 
@@ -723,9 +723,8 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // A plane in best_plane_for_pixel's form: the eigen fit of `m` as n, d in float, appended.
   auto append_plane_nd = [](const MomentSums& m, std::vector<float>& planes) {
     const FastFit f = FitSums(m);
-    planes.insert(planes.end(),
-                  {static_cast<float>(f.normal.x()), static_cast<float>(f.normal.y()),
-                   static_cast<float>(f.normal.z()), static_cast<float>(f.d)});
+    planes.insert(planes.end(), {static_cast<float>(f.normal.x()), static_cast<float>(f.normal.y()),
+                                 static_cast<float>(f.normal.z()), static_cast<float>(f.d)});
   };
   auto best_plane_for_pixel = [&](const Eigen::Vector3f& pf, float rel, const float* planes,
                                   int n) {
