@@ -6,6 +6,7 @@
 #include <cstring>
 #include <functional>
 #include <tuple>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -820,20 +821,38 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       int first_to = -2;  // -2: no valid pixel yet
       bool one_plane = true;
       std::size_t num_moved = 0;  // valid pixels that leave `own`, with their slot (below)
-      for (int y = y0; y < y1; ++y) {
-        for (int x = x0; x < x1; ++x) {
-          const std::size_t idx = static_cast<std::size_t>(y) * width + x;
-          const Eigen::Vector3f& pf = pts[idx];
-          if (!std::isfinite(pf.z())) continue;
-          const float z = internal::PointDepth(pf, spherical);
-          const int best = best_plane_for_pixel(pf, relative_noise(z), &cand[0][0], n_adj);
-          const int to = best >= 0 ? adj[best] : -1;
-          ws.labels[idx] = to;
-          moved[num_moved] = {idx, best >= 0 ? best : n_adj};  // kept if it leaves (no branch)
-          num_moved += to != own;
-          if (first_to == -2) first_to = to;
-          one_plane &= to == first_to;
+      // One copy of the pixel loop for a grid with a single candidate plane (most edge grids: a
+      // plane beside no other), where best_plane_for_pixel reduces to distance < tolerance.
+      auto label_pixels = [&](auto single_candidate) {
+        for (int y = y0; y < y1; ++y) {
+          for (int x = x0; x < x1; ++x) {
+            const std::size_t idx = static_cast<std::size_t>(y) * width + x;
+            const Eigen::Vector3f& pf = pts[idx];
+            if (!std::isfinite(pf.z())) continue;
+            const float z = internal::PointDepth(pf, spherical);
+            int best;
+            if constexpr (decltype(single_candidate)::value) {
+              const float* plane = cand[0];
+              const float np = plane[0] * pf.x() + plane[1] * pf.y() + plane[2] * pf.z();
+              const float tol =
+                  depth_model ? refine_sigmas_f * relative_noise(z) * std::abs(np) : gamma_f;
+              best = std::abs(np - plane[3]) < tol ? 0 : -1;
+            } else {
+              best = best_plane_for_pixel(pf, relative_noise(z), &cand[0][0], n_adj);
+            }
+            const int to = best >= 0 ? adj[best] : -1;
+            ws.labels[idx] = to;
+            moved[num_moved] = {idx, best >= 0 ? best : n_adj};  // kept if it leaves (no branch)
+            num_moved += to != own;
+            if (first_to == -2) first_to = to;
+            one_plane &= to == first_to;
+          }
         }
+      };
+      if (n_adj == 1) {
+        label_pixels(std::true_type());
+      } else {
+        label_pixels(std::false_type());
       }
       if (num_moved == 0) continue;
       if (one_plane) {
