@@ -51,7 +51,7 @@ class RegionBorderScan {
   void ScanBlock(int x0, int y0, int x1, int y1) {
 #if defined(__SSE2__)
     if constexpr (!kAtImageBorder) {
-      if (x1 - x0 <= 4) {
+      if (x1 - x0 <= 4 && x0 + 4 < width_) {
         ScanNarrowBlock(x0, y0, x1, y1);
         return;
       }
@@ -87,7 +87,9 @@ class RegionBorderScan {
   /// A block at most four pixels wide inside the image (GBRG's 3x3 and 4x4 edge grids): each row
   /// first asks, four pixels at once, whether any of its pixels has another region around; only
   /// such rows are scanned pixel by pixel (where most rows have none, a branch per pixel missed).
-  /// The loads reach one pixel beyond the block on each side, inside the image.
+  /// Its loads take four labels from columns x0 - 1, x0 and x0 + 1 of a row and x0 in the rows
+  /// above and below, whatever the block's width: inside the image for x0 > 0, x0 + 4 < width
+  /// and rows 1 to height - 2 (the caller's conditions).
   void ScanNarrowBlock(int x0, int y0, int x1, int y1) {
     const auto w = static_cast<std::size_t>(width_);
     const __m128i in_block = _mm_cmpgt_epi32(_mm_set1_epi32(x1 - x0), _mm_setr_epi32(0, 1, 2, 3));
