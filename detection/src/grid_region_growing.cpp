@@ -727,15 +727,20 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     planes.insert(planes.end(), {static_cast<float>(f.normal.x()), static_cast<float>(f.normal.y()),
                                  static_cast<float>(f.normal.z()), static_cast<float>(f.d)});
   };
+  // A pixel's distance to one candidate plane (n, d) and its tolerance there.
+  auto distance_and_tolerance = [&](const Eigen::Vector3f& pf, float rel, const float* plane,
+                                    float& dist, float& tol) {
+    const float np = plane[0] * pf.x() + plane[1] * pf.y() + plane[2] * pf.z();
+    tol = depth_model ? refine_sigmas_f * rel * std::abs(np) : gamma_f;
+    dist = std::abs(np - plane[3]);
+  };
   auto best_plane_for_pixel = [&](const Eigen::Vector3f& pf, float rel, const float* planes,
                                   int n) {
     int best = -1;
     float best_dist = 1.0f, best_tol = 1.0f;
     for (int i = 0; i < n; ++i) {
-      const float* plane = planes + 4 * i;
-      const float np = plane[0] * pf.x() + plane[1] * pf.y() + plane[2] * pf.z();
-      const float tol = depth_model ? refine_sigmas_f * rel * std::abs(np) : gamma_f;
-      const float dist = std::abs(np - plane[3]);
+      float dist, tol;
+      distance_and_tolerance(pf, rel, planes + 4 * i, dist, tol);
       // Selects rather than branches: which candidate wins is data, not a pattern.
       const bool better = dist * best_tol < best_dist * tol;
       best_dist = better ? dist : best_dist;
@@ -822,7 +827,8 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       bool one_plane = true;
       std::size_t num_moved = 0;  // valid pixels that leave `own`, with their slot (below)
       // One copy of the pixel loop for a grid with a single candidate plane (most edge grids: a
-      // plane beside no other), where best_plane_for_pixel reduces to distance < tolerance.
+      // plane beside no other), where best_plane_for_pixel reduces to distance < tolerance (its
+      // comparison multiplies each side by 1: the same result).
       auto label_pixels = [&](auto single_candidate) {
         for (int y = y0; y < y1; ++y) {
           for (int x = x0; x < x1; ++x) {
@@ -832,11 +838,9 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
             const float z = internal::PointDepth(pf, spherical);
             int best;
             if constexpr (decltype(single_candidate)::value) {
-              const float* plane = cand[0];
-              const float np = plane[0] * pf.x() + plane[1] * pf.y() + plane[2] * pf.z();
-              const float tol =
-                  depth_model ? refine_sigmas_f * relative_noise(z) * std::abs(np) : gamma_f;
-              best = std::abs(np - plane[3]) < tol ? 0 : -1;
+              float dist, tol;
+              distance_and_tolerance(pf, relative_noise(z), cand[0], dist, tol);
+              best = dist < tol ? 0 : -1;
             } else {
               best = best_plane_for_pixel(pf, relative_noise(z), &cand[0][0], n_adj);
             }
