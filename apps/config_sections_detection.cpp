@@ -11,7 +11,8 @@ void VisitDetection(FieldVisitor& v, DetectionSection& c) {
   auto& p = c.params;
   v.Field("method", c.method,
           "detector: grid (GBRG, grid.cell_size), grid3/4/5, grid-fast (6x6 grids, grid-level "
-          "refinement only), grid-paper (refit per join, no refinement/merge/ray fit), "
+          "refinement only), grid3-fast (the same with 3x3 grids), grid-paper (refit per join, "
+          "no refinement/merge/ray fit), "
           "point (PBRG), point-exact (refit per point), point-paper (no merge/ray fit)",
           DetectorMethods());
   v.Field("threshold_model", c.threshold_model,
@@ -92,6 +93,11 @@ void VisitGrid(FieldVisitor& v, detection::GridParams& c) {
           "its ray noise has no resolved normal yet and joins grids by the MSE test alone "
           "(0 = off)",
           0.0, 100.0);
+  v.Field("narrow_refine_points", c.narrow_refine_points,
+          "without detection.refine_boundary: the smallest plane (points of its whole grids) too "
+          "narrow for a fit to its interior grids that is refined pixel by pixel on its grids and "
+          "those around them",
+          0.0, 1e9);
 }
 
 std::vector<std::string> ValidateGrid(const detection::GridParams& c) { return c.Validate(); }

@@ -39,13 +39,6 @@ constexpr int kClassifyChunk = 1024;
 
 /// How many queue places ahead the growth prefetches grid data.
 constexpr std::size_t kPrefetchAhead = 6;
-/// The smallest plane too narrow for any whole-grid fit that grid-fast refines pixel by pixel
-/// (refine_narrow_plane): the size from which the project's tests and benchmarks count a plane
-/// as large. On real frames most such planes are smaller slivers of a neighbour (about 3 a TUM
-/// frame, 400-1800 px), which all together took 0.26-0.33 ms a frame to refine, a tenth of
-/// grid-fast's time, for no measured gain against grid3's planes.
-constexpr double kNarrowRefineMinPoints = 2000;
-
 /// How many edge grids ahead the refinement prefetches their points.
 constexpr std::size_t kRefinePrefetchAhead = 4;
 
@@ -123,15 +116,27 @@ std::vector<std::string> GridParams::Validate() const {
   if (refit_interval < 0) problems.push_back("refit_interval must be >= 0 (0 = adaptive)");
   if (!(unresolved_spread >= 0 && unresolved_spread <= 100))
     problems.push_back("unresolved_spread must be in [0, 100] (0 = off)");
+  if (!(narrow_refine_points >= 0)) problems.push_back("narrow_refine_points must be >= 0");
   return problems;
+}
+
+void UseGridLevelPipeline(DetectionParams& params, GridParams& grid) {
+  grid.refine_grids = true;
+  grid.unresolved_spread = 2.0;
+  params.refine_boundary = false;
 }
 
 void UseFastVariant(DetectionParams& params, GridParams& grid) {
   grid.cell_size = 6;
   grid.mu = 0;  // the automatic k^2 - k + 1
-  grid.refine_grids = true;
-  grid.unresolved_spread = 2.0;
-  params.refine_boundary = false;
+  UseGridLevelPipeline(params, grid);
+}
+
+void UseFast3x3Variant(DetectionParams& params, GridParams& grid) {
+  grid.cell_size = 3;
+  grid.mu = 0;
+  UseGridLevelPipeline(params, grid);
+  grid.narrow_refine_points = 1000.0;
 }
 
 GridRegionGrowing::GridRegionGrowing(const DetectionParams& params, const GridParams& grid,
@@ -951,7 +956,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // a pixel of a grid around goes to it when it fits the pixel within tolerance and better than
   // the grid's own plane does. Its plane is then fitted to its pixels; labels and sums follow.
   // (A pixel it gives away to a plane that is too narrow as well goes to none.) Only planes of
-  // kNarrowRefineMinPoints or more (see there).
+  // grid.narrow_refine_points or more (see there).
   auto refine_narrow_plane = [&](int r, const std::vector<int>& grids) {
     // Its plane and the planes next to its grids, as best_plane_for_pixel's candidates.
     std::vector<int>& candidates = ws.candidates;
@@ -1120,7 +1125,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
             if (params_.ray_fit) ws.fit_rays[r] = ws.apart_rays[r];
           } else {
             ws.too_narrow[r] = 1;
-            ws.refine_pixels[r] = ws.regions[r].k >= kNarrowRefineMinPoints;
+            ws.refine_pixels[r] = ws.regions[r].k >= grid_.narrow_refine_points;
             any_refined |= ws.refine_pixels[r] != 0;
           }
         }

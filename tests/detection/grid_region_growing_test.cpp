@@ -56,32 +56,40 @@ TEST(GridRegionGrowing, NoiseFreeRoomDepthThresholds) {
   test::ExpectPlanesFound(frame, gbrg.Detect(frame.cloud), 2000, 0.5, 0.005, "grid3 depth");
 }
 
-TEST(GridRegionGrowing, FastVariantNoiseFreeAndKinectNoiseWhereverTheGridsFall) {
-  // grid-fast noise-free under both threshold models and with Kinect noise (1-4 m), on the room
-  // rendered 630 to 652 pixels wide: the image centre, and so where grid-fast's grids cut the
-  // corners, moves by a pixel from one width to the next. (With 5x5 grids, fitted to all its
-  // grids, the grazing right wall came out 5-16 mm off on the noise-free frames 638 and 648 px
-  // wide and 2.6 cm off on a noisy one; fitted to them without the ray fit, 2.0-3.4 cm off on
-  // three noisy ones. With 6x6 grids, fitted to all its grids when too narrow for the interior
-  // fit, it came out 6-11 mm off noise-free at 632 and 634 px, until the grid-level refinement
-  // took in the rim grids growth had left out: the wall now has interior grids enough.)
+TEST(GridRegionGrowing, FastVariantsNoiseFreeAndKinectNoiseWhereverTheGridsFall) {
+  // grid-fast and grid3-fast (the same pipeline with 3x3 grids) noise-free under both threshold
+  // models and with Kinect noise (1-4 m), on the room rendered 630 to 652 pixels wide: the image
+  // centre, and so where grid-fast's grids cut the corners, moves by a pixel from one width to the
+  // next. (With 5x5 grids, fitted to all its grids, the grazing right wall came out 5-16 mm off on
+  // the noise-free frames 638 and 648 px wide and 2.6 cm off on a noisy one; fitted to them without
+  // the ray fit, 2.0-3.4 cm off on three noisy ones. With 6x6 grids, fitted to all its grids when
+  // too narrow for the interior fit, it came out 6-11 mm off noise-free at 632 and 634 px, until
+  // the grid-level refinement took in the rim grids growth had left out: the wall now has interior
+  // grids enough.)
   for (int width = 630; width <= 652; width += 2) {
     for (const bool depth : {true, false}) {
-      DetectionParams params = depth ? DetectionParams() : PaperConstants();
-      GridParams grid;
-      UseFastVariant(params, grid);
-      const GridRegionGrowing fast(params, grid);
-      const std::string what = "grid-fast width " + std::to_string(width);
-      const auto clean = test::RenderScene(test::RoomPlanes(), 0.0, 1, width, 480);
-      test::ExpectPlanesFound(clean, fast.Detect(clean.cloud), 2000, 0.5, 0.005,
-                              what + (depth ? " noise-free depth" : " noise-free constant"));
-      if (!depth) continue;  // the paper's constants are for noise-free data
-      const auto noisy = test::RenderScene(test::RoomPlanes(), 1.425e-3, width, width, 480);
-      const Segmentation seg = fast.Detect(noisy.cloud);
-      test::ExpectPlanesFound(noisy, seg, 2000, 2.0, 0.02, what + " noisy");
-      const auto assigned =
-          std::count_if(seg.labels.begin(), seg.labels.end(), [](int l) { return l >= 1; });
-      EXPECT_GT(assigned, 0.8 * noisy.cloud.CountValid()) << what;
+      for (const bool three : {false, true}) {
+        DetectionParams params = depth ? DetectionParams() : PaperConstants();
+        GridParams grid;
+        if (three) {
+          UseFast3x3Variant(params, grid);
+        } else {
+          UseFastVariant(params, grid);
+        }
+        const GridRegionGrowing fast(params, grid);
+        const std::string what =
+            std::string(three ? "grid3-fast" : "grid-fast") + " width " + std::to_string(width);
+        const auto clean = test::RenderScene(test::RoomPlanes(), 0.0, 1, width, 480);
+        test::ExpectPlanesFound(clean, fast.Detect(clean.cloud), 2000, 0.5, 0.005,
+                                what + (depth ? " noise-free depth" : " noise-free constant"));
+        if (!depth) continue;  // the paper's constants are for noise-free data
+        const auto noisy = test::RenderScene(test::RoomPlanes(), 1.425e-3, width, width, 480);
+        const Segmentation seg = fast.Detect(noisy.cloud);
+        test::ExpectPlanesFound(noisy, seg, 2000, 2.0, 0.02, what + " noisy");
+        const auto assigned =
+            std::count_if(seg.labels.begin(), seg.labels.end(), [](int l) { return l >= 1; });
+        EXPECT_GT(assigned, 0.8 * noisy.cloud.CountValid()) << what;
+      }
     }
   }
 }

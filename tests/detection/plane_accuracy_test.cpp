@@ -177,7 +177,7 @@ TEST(KnownAnswers, NarrowGrazingWallWhereverItFalls) {
   // The room's right wall turned from 20 to 23.5 deg about the vertical, rendered 630 to 650 px
   // wide: seen ever more edge-on, it narrows to 6-9 px at the back (2300-8600 px in all), and
   // where grids cut it moves by a pixel from one width to the next. GBRG with 3x3 and 5x5 grids,
-  // grid-fast and PBRG find it, and every other plane of 2000 px or more, as exactly as a wide
+  // grid-fast, grid3-fast and PBRG find it, and every other plane of 2000 px or more, as exactly as a wide
   // plane. (grid-fast's wall there is a column or two of 6x6 grids across both it and the back
   // wall: fitted and labelled by whole grids, it came out 2.6 cm to 0.9 m off, or mostly
   // missed, on 4 of these 36 renders, until such planes got the pixel-level refinement.)
@@ -188,15 +188,16 @@ TEST(KnownAnswers, NarrowGrazingWallWhereverItFalls) {
     planes[3] = {turned, turned.dot(Eigen::Vector3d(1.5, 0, 2))};
     for (int width = 630; width <= 650; width += 4) {
       const auto frame = test::RenderScene(planes, 0.0, 1, width, 480);
-      for (const int k : {3, 5, 6, 0}) {  // 6: grid-fast; 0: PBRG
+      for (const int k : {3, 5, 6, -3, 0}) {  // 6: grid-fast; -3: grid3-fast; 0: PBRG
         DetectionParams params;
         GridParams grid;
-        grid.cell_size = k;
+        grid.cell_size = std::abs(k);
         if (k == 6) UseFastVariant(params, grid);
+        if (k == -3) UseFast3x3Variant(params, grid);
+        const std::string name = k == 6 ? "grid-fast" : k == -3 ? "grid3-fast" : "";
         const std::unique_ptr<PlaneDetector> detector =
-            k > 0 ? std::unique_ptr<PlaneDetector>(
-                        new GridRegionGrowing(params, grid, k == 6 ? "grid-fast" : ""))
-                  : std::unique_ptr<PlaneDetector>(new PointRegionGrowing(params, PointParams()));
+            k != 0 ? std::unique_ptr<PlaneDetector>(new GridRegionGrowing(params, grid, name))
+                   : std::unique_ptr<PlaneDetector>(new PointRegionGrowing(params, PointParams()));
         test::ExpectPlanesFound(frame, detector->Detect(frame.cloud), 2000, 0.5, 0.005,
                                 detector->Name() + " wall at " + std::to_string(theta_deg) +
                                     " deg, " + std::to_string(width) + " px");

@@ -95,6 +95,10 @@ TEST(RealData, TumStructureNotextureFarFirstFrame) {
   // The grid-level refinement also gives a plane the grids along its rim that growth left out
   // when they fit it: 83.6 % of the valid pixels assigned before it did, 92.7 % after.
   EXPECT_GT(AssignedFraction(fast, cloud), 0.9);
+  DetectionParams fast3_params;
+  GridParams fast3_grid;
+  UseFast3x3Variant(fast3_params, fast3_grid);
+  CheckTumScene(GridRegionGrowing(fast3_params, fast3_grid).Detect(cloud), cloud, "grid3-fast");
 }
 
 /// Laser scan of a house (3DTK convention: y up, left-handed), centimetres -> metres. The
@@ -140,9 +144,14 @@ TEST(RealData, LaserScanHouse) {
   params.sigma_z2 = 0.0;
   CheckLaserScene(GridRegionGrowing(params, GridParams()).Detect(cloud), "grid3");
   CheckLaserScene(PointRegionGrowing(params, PointParams()).Detect(cloud), "point");
+  DetectionParams fast_params = params;
   GridParams fast_grid;
-  UseFastVariant(params, fast_grid);
-  CheckLaserScene(GridRegionGrowing(params, fast_grid).Detect(cloud), "grid-fast");
+  UseFastVariant(fast_params, fast_grid);
+  CheckLaserScene(GridRegionGrowing(fast_params, fast_grid).Detect(cloud), "grid-fast");
+  DetectionParams fast3_params = params;
+  GridParams fast3_grid;
+  UseFast3x3Variant(fast3_params, fast3_grid);
+  CheckLaserScene(GridRegionGrowing(fast3_params, fast3_grid).Detect(cloud), "grid3-fast");
 }
 
 }  // namespace

@@ -56,18 +56,31 @@ struct GridParams {
   /// the MSE test alone, without the angle and coplanarity tests. 0 = off (every region's normal
   /// counts from its seed on).
   double unresolved_spread = 0.0;
+  /// Without the pixel-level refinement (detection.refine_boundary off): the smallest plane, in
+  /// points of its whole grids, too narrow for any whole-grid fit (a column or two of grids) that
+  /// gets the pixel-level refinement on its grids and the grids around them. Smaller ones keep
+  /// whole grids: on real frames most are slivers of a neighbour (about 3 a TUM frame,
+  /// 400-1800 px with 6x6 grids), which all together took 0.26-0.33 ms a frame to refine, a
+  /// tenth of grid-fast's time, for no measured gain against grid3's planes.
+  double narrow_refine_points = 2000.0;
 
   int EffectiveMu() const { return mu > 0 ? mu : cell_size * cell_size - cell_size + 1; }
   std::vector<std::string> Validate() const;
 };
 
-/// Turns parameters into those of GBRG's fast variant (method `grid-fast`): 6x6 grids, regions
-/// without a resolved normal grown by the MSE test alone (unresolved_spread 2), the grid-level
-/// refinement in place of the pixel-level one, so that every pixel keeps its grid's label and
-/// each plane is fitted (along the rays, as set) to its interior grids; only a plane of 2000
-/// points or more too narrow for any such fit (a column or two of grids) gets the pixel-level
-/// refinement on its grids and those around them. Merging and the ray fit stay as set.
+/// GBRG's grid-level pipeline, keeping the grid size: regions without a resolved normal grown by
+/// the MSE test alone (unresolved_spread 2), the grid-level refinement in place of the
+/// pixel-level one, so that every pixel keeps its grid's label and each plane is fitted (along
+/// the rays, as set) to its interior grids; only a plane of narrow_refine_points or more too
+/// narrow for any such fit (a column or two of grids) gets the pixel-level refinement on its
+/// grids and those around them. Merging and the ray fit stay as set.
+void UseGridLevelPipeline(DetectionParams& params, GridParams& grid);
+/// Method `grid-fast`: the grid-level pipeline with 6x6 grids.
 void UseFastVariant(DetectionParams& params, GridParams& grid);
+/// Method `grid3-fast`: the grid-level pipeline with the paper's 3x3 grids. A narrow plane's
+/// whole 3x3 grids hold about half of it (the room's noise-free right wall turned 23 deg:
+/// 1143 of its 2298 px), so the pixel-level refinement of narrow planes starts at 1000 points.
+void UseFast3x3Variant(DetectionParams& params, GridParams& grid);
 
 class GridRegionGrowing : public PlaneDetector {
  public:
