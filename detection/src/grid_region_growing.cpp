@@ -678,10 +678,11 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   if (grid_.refine_grids && num_regions > 0 && refine_edge_grids()) find_edge_grids();
   // Pixel labels from a value per grid. Each band of k rows is written once: a row of grid values
   // expanded to pixels, appended once for every row of the band; then the invalid pixels of the
-  // grids with a value >= 0 are set to -1 (listed in step 1: few of them have a value). Appended, not resized and overwritten:
-  // resizing fills the whole image with zeros first, a second pass over 1.2 MB (grid-fast's
-  // finalize stage 0.51 -> 0.39 ms in alternating runs on TUM frames). The row is filled with the
-  // grid size known at compile time where it is 3 or 6 (GBRG's 3x3 and 6x6 variants).
+  // grids with a value >= 0 are set to -1 (listed in step 1: few of them have a value). Appended,
+  // not resized and overwritten: resizing fills the whole image with zeros first, a second pass
+  // over 1.2 MB (grid-fast's finalize stage 0.51 -> 0.39 ms in alternating runs on TUM frames). The
+  // row is filled with the grid size known at compile time where it is 3 or 6 (GBRG's 3x3 and 6x6
+  // variants).
   auto expand_to_pixels = [&](const std::int32_t* grid_values, std::vector<std::int32_t>& pixels) {
     pixels.clear();
     pixels.reserve(static_cast<std::size_t>(width) * height);
