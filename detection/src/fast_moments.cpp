@@ -299,6 +299,77 @@ __attribute__((target("avx2,fma"))) void SmallestEigenvectorAvx2(const double* c
 
 }  // namespace
 
+namespace {
+
+/// One grid of GridNoiseBatch, through MomentSums's own functions (scalars in and out, like
+/// SmallestEigenvectorLane).
+__attribute__((always_inline)) inline void GridNoiseLane(
+    double k, double wxx, double wxy, double wxz, double wyy, double wyz, double wzz, double l2,
+    double vx, double vy, double vz, double eta, double eta_sigmas, double& isotropic, double& tilt,
+    double& effective, double& angle) {
+  MomentSums m;
+  m.k = k;
+  m.wxx = wxx;
+  m.wxy = wxy;
+  m.wxz = wxz;
+  m.wyy = wyy;
+  m.wyz = wyz;
+  m.wzz = wzz;
+  // Locals, not the outputs read back (array elements, which kept the loop from vectorising).
+  const double t = m.NormalTilt(l2);
+  const double e = m.EffectiveMse(Eigen::Vector3d(vx, vy, vz), t);
+  isotropic = m.IsotropicMse();
+  tilt = t;
+  effective = e;
+  angle = eta + eta_sigmas * std::sqrt(e / std::max(l2, 1e-18));
+}
+
+__attribute__((always_inline)) inline void GridNoiseLoop(
+    const double* __restrict k, const double* __restrict w0, const double* __restrict w1,
+    const double* __restrict w2, const double* __restrict w3, const double* __restrict w4,
+    const double* __restrict w5, const double* __restrict l2, const double* __restrict vx,
+    const double* __restrict vy, const double* __restrict vz, int n, double eta, double eta_sigmas,
+    double* __restrict isotropic, double* __restrict tilt, double* __restrict effective,
+    double* __restrict angle) {
+  for (int i = 0; i < n; ++i) {
+    GridNoiseLane(k[i], w0[i], w1[i], w2[i], w3[i], w4[i], w5[i], l2[i], vx[i], vy[i], vz[i], eta,
+                  eta_sigmas, isotropic[i], tilt[i], effective[i], angle[i]);
+  }
+}
+
+void GridNoiseDefault(const double* k, const double* const w[6], const double* l2,
+                      const double* const v[3], int n, double eta, double eta_sigmas,
+                      double* isotropic, double* tilt, double* effective, double* angle) {
+  GridNoiseLoop(k, w[0], w[1], w[2], w[3], w[4], w[5], l2, v[0], v[1], v[2], n, eta, eta_sigmas,
+                isotropic, tilt, effective, angle);
+}
+
+#ifdef PLANESLAM_X86
+__attribute__((target("avx2"))) void GridNoiseAvx2(const double* k, const double* const w[6],
+                                                   const double* l2, const double* const v[3],
+                                                   int n, double eta, double eta_sigmas,
+                                                   double* isotropic, double* tilt,
+                                                   double* effective, double* angle) {
+  GridNoiseLoop(k, w[0], w[1], w[2], w[3], w[4], w[5], l2, v[0], v[1], v[2], n, eta, eta_sigmas,
+                isotropic, tilt, effective, angle);
+}
+#endif
+
+}  // namespace
+
+void GridNoiseBatch(const double* k, const double* const w[6], const double* l2,
+                    const double* const v[3], int n, double eta, double eta_sigmas,
+                    double* isotropic, double* tilt, double* effective, double* angle,
+                    SimdKernel kernel) {
+#ifdef PLANESLAM_X86
+  if (kernel == SimdKernel::kAvx2) {
+    GridNoiseAvx2(k, w, l2, v, n, eta, eta_sigmas, isotropic, tilt, effective, angle);
+    return;
+  }
+#endif
+  GridNoiseDefault(k, w, l2, v, n, eta, eta_sigmas, isotropic, tilt, effective, angle);
+}
+
 void SmallestEigenvector(const double c[6], SymEigen3& e) {
   double x, y, z, l1;
   SmallestEigenvectorLane(c[0], c[1], c[2], c[3], c[4], c[5], e.l1, e.l2, e.l3, x, y, z, l1);

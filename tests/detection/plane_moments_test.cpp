@@ -213,6 +213,58 @@ TEST(FastMoments, BatchEigenvectorsEqualTheScalarOnes) {
   }
 }
 
+TEST(FastMoments, GridNoiseBatchEqualsTheMomentSumsFigures) {
+  // Grids of noisy points at 0.5-8 m (spread from flat to round, normals from the fit or random):
+  // every lane of every kernel gives exactly MomentSums's IsotropicMse, NormalTilt and
+  // EffectiveMse, and the angle tolerance from them, as GBRG's classification used to form them.
+  std::mt19937 rng(37);
+  std::uniform_real_distribution<double> uni(-1, 1), depth(0.5, 8.0);
+  constexpr int kCount = 500;
+  constexpr double kEta = 0.2, kEtaSigmas = 2.0;
+  std::vector<double> k, w[6], l2, v[3];
+  std::vector<MomentSums> grids;
+  for (int i = 0; i < kCount; ++i) {
+    MomentSums m;
+    const double z = depth(rng), flat = i % 5 == 0 ? 1.0 : 0.01 * (i % 4);
+    for (int p = 0; p < 3 + i % 7; ++p) {
+      m.AddPosition(0.005 * z * uni(rng), 0.005 * z * uni(rng), z + flat * 0.005 * z * uni(rng));
+    }
+    m.SetUniformNoise(1e-6 * z * z);
+    double c[6];
+    m.Scatter(c);
+    const SymEigen3 e = SymEigen3Smallest(c);
+    const Eigen::Vector3d n =
+        i % 3 == 0 ? Eigen::Vector3d(uni(rng), uni(rng), uni(rng)).normalized() : e.v1;
+    grids.push_back(m);
+    k.push_back(m.k);
+    const double wm[6] = {m.wxx, m.wxy, m.wxz, m.wyy, m.wyz, m.wzz};
+    for (int j = 0; j < 6; ++j) w[j].push_back(wm[j]);
+    l2.push_back(i % 50 == 7 ? 0.0 : e.l2);  // a degenerate spread too
+    for (int j = 0; j < 3; ++j) v[j].push_back(n(j));
+  }
+  const double* wc[6];
+  for (int j = 0; j < 6; ++j) wc[j] = w[j].data();
+  const double* vc[3] = {v[0].data(), v[1].data(), v[2].data()};
+  for (SimdKernel kernel : KernelsOfThisCpu()) {
+    SCOPED_TRACE(::testing::Message() << "kernel " << static_cast<int>(kernel));
+    std::vector<double> iso(kCount), tilt(kCount), effective(kCount), angle(kCount);
+    GridNoiseBatch(k.data(), wc, l2.data(), vc, kCount, kEta, kEtaSigmas, iso.data(), tilt.data(),
+                   effective.data(), angle.data(), kernel);
+    for (int i = 0; i < kCount; ++i) {
+      const MomentSums& m = grids[i];
+      const Eigen::Vector3d n(v[0][i], v[1][i], v[2][i]);
+      const double expected_tilt = m.NormalTilt(l2[i]);
+      const double expected_effective = m.EffectiveMse(n, expected_tilt);
+      EXPECT_EQ(iso[i], m.IsotropicMse()) << i;
+      EXPECT_EQ(tilt[i], expected_tilt) << i;
+      EXPECT_EQ(effective[i], expected_effective) << i;
+      EXPECT_EQ(angle[i],
+                kEta + kEtaSigmas * std::sqrt(expected_effective / std::max(l2[i], 1e-18)))
+          << i;
+    }
+  }
+}
+
 TEST(FastMoments, IncrementalFitEqualsBatchFit) {
   const auto pts = NoisyPlanePoints(400, 6, 0.005, Eigen::Vector3d(0.1, 0.9, 0.3), 1.2);
   MomentSums inc;

@@ -295,6 +295,18 @@ void SmallestEigenvector(const double c[6], SymEigen3& e);
 void SmallestEigenvectorBatch(const double* const c[6], const double* l1, const double* l2,
                               const double* l3, int n, double* const v[3], double* l1_refined,
                               SimdKernel kernel = FastestSimdKernel());
+/// GBRG's noise figures of many grids at once (structure of arrays; grid i has K = k[i] > 0, the
+/// noise moment's upper triangle {w[0][i], ..., w[5][i]} = {wxx, wxy, wxz, wyy, wyz, wzz}, second
+/// eigenvalue l2[i] and unit normal (v[0][i], v[1][i], v[2][i])): isotropic[i] =
+/// IsotropicMse(), tilt[i] = NormalTilt(l2), effective[i] = EffectiveMse(v, tilt[i]) and
+/// angle[i] = eta + eta_sigmas sqrt(effective[i] / max(l2, 1e-18)), its normal's angle tolerance
+/// [rad]. MomentSums's own arithmetic lane by lane (no fused multiply-adds), so the results are
+/// equal; four lanes at once with AVX2. Each grid's dozen divisions and square roots, in a loop
+/// that branches on them, held up the classification rules.
+void GridNoiseBatch(const double* k, const double* const w[6], const double* l2,
+                    const double* const v[3], int n, double eta, double eta_sigmas,
+                    double* isotropic, double* tilt, double* effective, double* angle,
+                    SimdKernel kernel = FastestSimdKernel());
 /// The Newton half of SymEigenvaluesAscending for many matrices at once (GBRG's classification),
 /// stopping at a step below relative_tolerance times the trace. Matrix i is {c[0][i], ...,
 /// c[5][i]} (upper triangle, structure of arrays). A fixed number of steps and no branches let
