@@ -1127,7 +1127,24 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     if (grid_.refine_grids) {
       ws.fit_sums = ws.regions;
       ws.fit_rays = ws.rays;
-      for (const int c : ws.edge_grids) {  // every grid of a plane that is not interior
+      // Every grid of a plane that is not interior. Their sums and ray sums (200 bytes a grid,
+      // in arrays of 6.8 MB with 3x3 grids) have left the caches since the moments pass: fetched
+      // a few edge grids ahead.
+      const std::size_t num_edge = ws.edge_grids.size();
+      for (std::size_t e = 0; e < num_edge; ++e) {
+        if (e + kRefinePrefetchAhead < num_edge) {
+          const int ahead = ws.edge_grids[e + kRefinePrefetchAhead];
+          const char* sums = reinterpret_cast<const char*>(&ws.sums[ahead]);
+          __builtin_prefetch(sums);
+          __builtin_prefetch(sums + 64);
+          __builtin_prefetch(sums + sizeof(MomentSums) - 1);
+          if (params_.ray_fit) {
+            const char* rays = reinterpret_cast<const char*>(&ws.grid_rays[ahead]);
+            __builtin_prefetch(rays);
+            __builtin_prefetch(rays + sizeof(RaySums) - 1);
+          }
+        }
+        const int c = ws.edge_grids[e];
         const int r = ws.cell_region[c];
         if (r < 0) continue;
         ws.fit_sums[r].Subtract(ws.sums[c]);
