@@ -660,6 +660,12 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       } else {
         for (int i = 0; i < 9; ++i) around[i] = region_at(cx + i % 3 - 1, cy + i / 3 - 1);
       }
+      // Most edge grids of a plane have only their own plane around (and no plane): they stay, as
+      // the test below would tell after a store and a load of a stamp per neighbour, each load
+      // waiting on the store before it when the neighbours share a plane.
+      bool own_plane_only = own >= 0;
+      for (const std::int32_t r : around) own_plane_only &= (r == own) | (r < 0);
+      if (own_plane_only) continue;
       const std::int32_t fresh_stamp = static_cast<std::int32_t>(e + 1);
       stamp[-1] = fresh_stamp;
       int candidates[9];
