@@ -535,12 +535,26 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     }
     seeds.resize(kept);
     if (next >= seeds.size()) break;
-    const std::size_t chunk = std::max<std::size_t>(256, (seeds.size() - next) / 32);
-    const std::size_t end = std::min(seeds.size(), next + chunk);
+    // The chunk: the keys below a threshold taken from a sample of the keys left, moved to the
+    // front in one pass (std::partition; nth_element took two to three passes: the sort and
+    // selection took 0.25 ms of a TUM frame with 3x3 grids). A sample key is itself a key left,
+    // so at least the smallest sample key is below the threshold.
+    const std::size_t remaining = seeds.size() - next;
+    const std::size_t chunk = std::max<std::size_t>(256, remaining / 32);
     const auto first = seeds.begin() + static_cast<std::ptrdiff_t>(next);
-    const auto last = seeds.begin() + static_cast<std::ptrdiff_t>(end);
-    if (last != seeds.end()) std::nth_element(first, last, seeds.end());
+    auto last = seeds.end();
+    if (remaining > chunk) {
+      constexpr std::size_t kSample = 64;
+      std::uint64_t sample[kSample];
+      for (std::size_t s = 0; s < kSample; ++s) sample[s] = first[s * remaining / kSample];
+      std::sort(sample, sample + kSample);
+      const std::uint64_t threshold =
+          sample[std::clamp<std::size_t>(kSample * chunk / remaining, 1, kSample - 1)];
+      last = std::partition(first, seeds.end(),
+                            [threshold](std::uint64_t key) { return key < threshold; });
+    }
     std::sort(first, last);
+    const std::size_t end = static_cast<std::size_t>(last - seeds.begin());
     for (; next < end; ++next) {
       const int seed = static_cast<int>(seeds[next] & 0xffffffffu);
       if (ws.mark[seed] != kTaken) grow_from(seed);  // else already in R or R'
