@@ -726,7 +726,7 @@ void SumPixelBlock(const Eigen::Vector3f* points, int width, int x0, int y0, int
 
 void SumGridRow(const Eigen::Vector3f* points, int width, int height, int y0, int y1, int k,
                 bool spherical, const DetectionParams& params, MomentSums* sums, RaySums* rays,
-                SimdKernel kernel) {
+                SimdKernel kernel, const MomentSums* next_sums, const RaySums* next_rays) {
   const int cells = (width + k - 1) / k;
   int cx = 0;
 #ifdef PLANESLAM_X86
@@ -753,6 +753,21 @@ void SumGridRow(const Eigen::Vector3f* points, int width, int height, int y0, in
         if (first + 4 * static_cast<std::size_t>(k) > num_points) break;
         const char* row = reinterpret_cast<const char*>(points + first);
         for (int byte = 0; byte < 12 * 4 * k; byte += 64) __builtin_prefetch(row + byte);
+      }
+      // The next row's sums of the same four grids, fetched for writing: a store to a line that
+      // is not in the cache waits for it to be read first, and the 4.4 MB of sums of 3x3 grids
+      // are not, a frame later (SumGridRow on TUM frames, 3x3 grids: 1.69 -> 1.36 ms, 8/8
+      // alternating runs; two rows ahead was slower).
+      if (next_sums != nullptr) {
+        const char* line = reinterpret_cast<const char*>(next_sums + cx);
+        for (std::size_t b = 0; b < 4 * sizeof(MomentSums); b += 64)
+          __builtin_prefetch(line + b, 1);
+      }
+      if (next_rays != nullptr) {
+        const char* line = reinterpret_cast<const char*>(next_rays + cx);
+        for (std::size_t b = 0; b < 4 * sizeof(RaySums) + 63; b += 64) {
+          __builtin_prefetch(line + b, 1);
+        }
       }
       sum_four_grids(points, width, x0, y0, y1, k, params, sums + cx,
                      rays != nullptr ? rays + cx : nullptr);

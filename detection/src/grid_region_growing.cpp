@@ -341,8 +341,12 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   for (int cy = 0; cy < cells_y; ++cy) {
     const int y0 = cy * k, y1 = std::min(height, y0 + k);
     const std::size_t row = static_cast<std::size_t>(cy) * cells_x;
+    const bool last_row = cy + 1 == cells_y;
+    const std::size_t next_row = row + cells_x;
     SumGridRow(pts, width, height, y0, y1, k, spherical, params_, ws.sums.data() + row,
-               params_.ray_fit ? ws.grid_rays.data() + row : nullptr, kernel);
+               params_.ray_fit ? ws.grid_rays.data() + row : nullptr, kernel,
+               last_row ? nullptr : ws.sums.data() + next_row,
+               params_.ray_fit && !last_row ? ws.grid_rays.data() + next_row : nullptr);
     for (std::size_t c = row; c < row + cells_x; ++c) {
       MomentSums& m = ws.sums[c];
       ws.counts[c] = static_cast<std::int32_t>(m.k);

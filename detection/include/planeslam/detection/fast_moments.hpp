@@ -257,10 +257,12 @@ void SumPixelBlock(const Eigen::Vector3f* points, int width, int x0, int y0, int
 /// and its sums are written to sums[cx] (and rays[cx] when `rays` is not null), for cx in
 /// [0, ceil(width / k)). W is left 0. The AVX2 kernel sums four neighbouring grids at once, one a
 /// lane, in the same pixel order as SumPixelBlock; their results differ by the rounding of fused
-/// multiply-adds only (~1e-16 relative).
+/// multiply-adds only (~1e-16 relative). `next_sums` and `next_rays`, when not null, are where the
+/// caller's next row of grids goes: fetched for writing while this row is summed.
 void SumGridRow(const Eigen::Vector3f* points, int width, int height, int y0, int y1, int k,
                 bool spherical, const DetectionParams& params, MomentSums* sums, RaySums* rays,
-                SimdKernel kernel);
+                SimdKernel kernel, const MomentSums* next_sums = nullptr,
+                const RaySums* next_rays = nullptr);
 
 /// out[i] = shifted_table[in[i] + 1] for i < n, every in[i] >= -1 (a label image through a table
 /// indexed from -1: region -> merged region, region -> plane id). Eight pixels per gather with
