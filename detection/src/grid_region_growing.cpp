@@ -213,6 +213,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // The non-sparse grids in chunks of kClassifyChunk, whose batch arrays stay in cache: per
   // chunk the grids' scatter, then their eigenvalues all at once (the batch keeps the divisions of
   // many grids in flight), their eigenvectors, and the rules.
+  ws.dense.resize(kClassifyChunk);
   for (auto& column : ws.scatter) column.resize(kClassifyChunk);
   for (auto* l : {&ws.l1, &ws.l2, &ws.l3, &ws.eigen_ok, &ws.l1_refined, &ws.dense_k, &ws.isotropic,
                   &ws.tilt, &ws.effective, &ws.angle}) {
@@ -222,11 +223,13 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   for (auto& column : ws.dense_w) column.resize(kClassifyChunk);
   auto classify = [&](int begin, int end) {
     for (int next = begin; next < end;) {
-      ws.dense.clear();
-      for (; next < end && static_cast<int>(ws.dense.size()) < kClassifyChunk; ++next) {
-        if (ws.counts[next] >= mu) ws.dense.push_back(next);  // else sparse
+      // The non-sparse grids listed without a branch per grid (which ones are is data).
+      int num_dense = 0;
+      int* const dense = ws.dense.data();
+      for (; next < end && num_dense < kClassifyChunk; ++next) {
+        dense[num_dense] = next;
+        num_dense += ws.counts[next] >= mu;  // else sparse
       }
-      const int num_dense = static_cast<int>(ws.dense.size());
       for (int j = 0; j < num_dense; ++j) {
         const MomentSums& s = ws.sums[ws.dense[j]];
         double scatter[6];
