@@ -297,10 +297,6 @@ __attribute__((target("avx2,fma"))) void SmallestEigenvectorAvx2(const double* c
 }
 #endif
 
-}  // namespace
-
-namespace {
-
 /// One grid of GridNoiseBatch, through MomentSums's own functions (scalars in and out, like
 /// SmallestEigenvectorLane).
 __attribute__((always_inline)) inline void GridNoiseLane(
@@ -756,8 +752,9 @@ void SumGridRow(const Eigen::Vector3f* points, int width, int height, int y0, in
       }
       // The next row's sums of the same four grids, fetched for writing: a store to a line that
       // is not in the cache waits for it to be read first, and the 4.4 MB of sums of 3x3 grids
-      // are not, a frame later (SumGridRow on TUM frames, 3x3 grids: 1.69 -> 1.36 ms, 8/8
-      // alternating runs; two rows ahead was slower).
+      // are not, a frame later (SumGridRow on TUM frames, 3x3 grids: 1.54 -> 1.30 ms in 6 of 8
+      // alternating runs, 1.69 -> 1.36 ms in 8 of 8 for a first version; two rows ahead was
+      // slower).
       if (next_sums != nullptr) {
         const char* line = reinterpret_cast<const char*>(next_sums + cx);
         for (std::size_t b = 0; b < 4 * sizeof(MomentSums); b += 64)

@@ -296,8 +296,8 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
           e.l1 = ws.l1_refined[j];
         }
         const double mse = e.l1 / s.k;
-        // sigma_n,rms^2 (the effective MSE with this tilt, which stays as it was where
-        // have_normal holds)
+        // sigma_n,rms^2 (where have_normal holds, tilt is still the batch's, and so is the
+        // effective MSE with it)
         const double noise_mse = have_normal ? ws.effective[j] : iso;
         bool planar = e.l1 <= grid_.beta * e.l2;
         if (!planar && depth_model) {

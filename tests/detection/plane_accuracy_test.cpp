@@ -177,9 +177,9 @@ TEST(KnownAnswers, NarrowGrazingWallWhereverItFalls) {
   // The room's right wall turned from 20 to 23.5 deg about the vertical, rendered 630 to 650 px
   // wide: seen ever more edge-on, it narrows to 6-9 px at the back (2300-8600 px in all), and
   // where grids cut it moves by a pixel from one width to the next. GBRG with 3x3 and 5x5 grids,
-  // grid-fast, grid3-fast and PBRG find it, and every other plane of 2000 px or more, as exactly as a wide
-  // plane. (grid-fast's wall there is a column or two of 6x6 grids across both it and the back
-  // wall: fitted and labelled by whole grids, it came out 2.6 cm to 0.9 m off, or mostly
+  // grid-fast, grid3-fast and PBRG find it, and every other plane of 2000 px or more, as exactly as
+  // a wide plane. (grid-fast's wall there is a column or two of 6x6 grids across both it and the
+  // back wall: fitted and labelled by whole grids, it came out 2.6 cm to 0.9 m off, or mostly
   // missed, on 4 of these 36 renders, until such planes got the pixel-level refinement.)
   for (const double theta_deg : {20.0, 21.0, 22.0, 22.5, 23.0, 23.5}) {
     auto planes = test::RoomPlanes();
