@@ -21,7 +21,8 @@ struct DetectionSection {
 };
 
 /// Method names MakeDetector accepts, e.g. for --help and the benchmark:
-/// grid (config's grid.cell_size), grid3, grid4, grid5, grid-paper (the paper's GBRG alone: no
+/// grid (config's grid.cell_size), grid3, grid4, grid5, grid-fast (6x6 grids, grid-level
+/// pipeline), grid3-fast (the same with 3x3 grids), grid-paper (the paper's GBRG alone: no
 /// refinement, no merging), point (adaptive refit), point-exact (refit on every point, the paper's
 /// incremental PBRG), point-paper (point-exact without merging).
 std::vector<std::string> DetectorMethods();
