@@ -684,9 +684,9 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       } else {
         for (int i = 0; i < 9; ++i) around[i] = region_at(cx + i % 3 - 1, cy + i / 3 - 1);
       }
-      // Most edge grids of a plane have only their own plane around (and no plane): they stay, as
-      // the test below would tell after a store and a load of a stamp per neighbour, each load
-      // waiting on the store before it when the neighbours share a plane.
+      // A grid of a plane with only its own plane around (and no plane) stays: most edge grids.
+      // Told before the stamps below, whose store and load per neighbour wait on each other when
+      // the neighbours share a plane.
       bool own_plane_only = own >= 0;
       for (const std::int32_t r : around) own_plane_only &= (r == own) | (r < 0);
       if (own_plane_only) continue;
@@ -699,7 +699,6 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         num_candidates += stamp[r] != fresh_stamp;
         stamp[r] = fresh_stamp;
       }
-      if (own >= 0 && num_candidates == 1) continue;  // its own plane only
       int best = -1;
       double best_ratio = 1.0;  // beyond tolerance: no plane
       for (int i = 0; i < num_candidates; ++i) {
