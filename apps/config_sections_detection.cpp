@@ -98,6 +98,11 @@ void VisitGrid(FieldVisitor& v, detection::GridParams& c) {
           "narrow for a fit to its interior grids that is refined pixel by pixel on its grids and "
           "those around them",
           0.0, 1e9);
+  v.Field("refine_interior_fraction", c.refine_interior_fraction,
+          "without detection.refine_boundary: a plane of narrow_refine_points or more whose "
+          "interior grids hold under this fraction of its points is refined pixel by pixel too "
+          "(0 = only planes too narrow for any whole-grid fit)",
+          0.0, 1.0);
 }
 
 std::vector<std::string> ValidateGrid(const detection::GridParams& c) { return c.Validate(); }

@@ -78,7 +78,7 @@ struct Workspace {
   std::vector<std::uint8_t> edge_flags;  ///< whether each grid of a row is an edge grid
   std::vector<MomentSums> fit_sums;      ///< what each plane is fitted to (whole grids)
   std::vector<RaySums> fit_rays;
-  std::vector<std::uint8_t> narrow;    ///< planes too narrow for the interior fit
+  std::vector<std::uint8_t> narrow;    ///< 1: too narrow for the interior fit; 2: refined anyway
   std::vector<MomentSums> apart_sums;  ///< such a plane without its grids next to another plane
   std::vector<RaySums> apart_rays;
   std::vector<std::uint8_t> too_narrow;     ///< planes too narrow for the apart fit as well
@@ -93,6 +93,8 @@ struct Workspace {
   /// Moves of the pixel-level refinement of such a plane: (pixel, its grid, candidate it goes
   /// to: 0 the plane itself, -1 none).
   std::vector<std::tuple<std::size_t, int, int>> narrow_moves;
+  std::vector<std::tuple<std::size_t, int, int>> narrow_choices;  ///< refine_narrow_plane's
+  std::vector<internal::RayPlane> candidate_ray_planes;           ///< refine_narrow_plane's
   /// Pixel labels that differ from their grid's: (pixel, a grid of their plane, or -1: none).
   std::vector<std::pair<std::size_t, int>> pixel_overrides;
   std::vector<std::int32_t> grid_ids;  ///< each grid's plane id (pixel labels = their grid's)
@@ -120,6 +122,8 @@ std::vector<std::string> GridParams::Validate() const {
   if (!(unresolved_spread >= 0 && unresolved_spread <= 100))
     problems.push_back("unresolved_spread must be in [0, 100] (0 = off)");
   if (!(narrow_refine_points >= 0)) problems.push_back("narrow_refine_points must be >= 0");
+  if (!(refine_interior_fraction >= 0 && refine_interior_fraction <= 1))
+    problems.push_back("refine_interior_fraction must be in [0, 1]");
   return problems;
 }
 
@@ -140,6 +144,7 @@ void UseFast3x3Variant(DetectionParams& params, GridParams& grid) {
   grid.mu = 0;
   UseGridLevelPipeline(params, grid);
   grid.narrow_refine_points = 1000.0;
+  grid.refine_interior_fraction = 0.5;
 }
 
 GridRegionGrowing::GridRegionGrowing(const DetectionParams& params, const GridParams& grid,
@@ -1079,24 +1084,21 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         }
       }
     };
-    // Its grids' pixels: to the best candidate (0: itself), else to none.
-    auto& moves = ws.narrow_moves;  // (pixel, its grid, candidate it goes to: 0 itself, -1 none)
-    moves.clear();
-    MomentSums own;
+    // Its grids' pixels: to the best candidate (0: itself), else to none. The pixels of the
+    // grids around its grids: to it when it is the better of it and the grid's own plane, within
+    // tolerance. Each pixel's choice: (pixel, its grid, candidate: 0 itself, -1 none; for a pixel
+    // of a grid around that stays, the grid's own plane's candidate, or -2 when that is none).
+    auto& choices = ws.narrow_choices;
+    choices.clear();
     const int num_candidates = static_cast<int>(candidates.size());
     for (const int c : grids) {
       for_each_pixel(c, [&](std::size_t i, const Eigen::Vector3f& pf) {
         const float z = internal::PointDepth(pf, spherical);
-        const int best = best_plane_for_pixel(pf, relative_noise(z), planes.data(), num_candidates);
-        if (best == 0) {
-          own.Add(pf.x(), pf.y(), pf.z(), ws.noise_weight[c]);
-        } else {
-          moves.emplace_back(i, c, best);
-        }
+        choices.push_back(
+            {i, c, best_plane_for_pixel(pf, relative_noise(z), planes.data(), num_candidates)});
       });
     }
-    // The pixels of the grids around its grids: to it when it is the better of it and the grid's
-    // own plane, within tolerance.
+    const std::size_t num_own_grid_pixels = choices.size();
     for (const int n : around) {
       const int o = ws.cell_region[n];
       const int j =
@@ -1105,12 +1107,86 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       std::copy(planes.begin(), planes.begin() + 4, pair);
       const int num_pair = j < num_candidates ? 2 : 1;
       if (num_pair == 2) std::copy(planes.begin() + 4 * j, planes.begin() + 4 * j + 4, pair + 4);
+      const int stays = num_pair == 2 ? j : o < 0 ? -1 : -2;
       for_each_pixel(n, [&](std::size_t i, const Eigen::Vector3f& pf) {
         const float z = internal::PointDepth(pf, spherical);
-        if (best_plane_for_pixel(pf, relative_noise(z), pair, num_pair) != 0) return;
-        own.Add(pf.x(), pf.y(), pf.z(), ws.noise_weight[n]);
-        moves.emplace_back(i, n, 0);
+        const bool joins = best_plane_for_pixel(pf, relative_noise(z), pair, num_pair) == 0;
+        choices.push_back({i, n, joins ? 0 : stays});
       });
+    }
+    // The candidates above are eigen fits, and its own, of grids that hold other surfaces too, is
+    // tilted (on a surface seen at a grazing angle, by the depth noise as well: see ray_fit), so
+    // the pixels chosen against it are too. With the ray fit the choice is made a second time
+    // against the planes along the rays (its own of the pixels chosen first, the others' of
+    // their fit subsets), as the final crease competition of the pixel-level methods makes it: a
+    // pixel moves to a candidate whose surface its ray sees (VisibleHere), and a pixel of no
+    // plane joins the candidate that passes nearest it along the ray, within the gate. (Synthetic
+    // room, Kinect noise, the right wall turned 23 deg, 638 px wide, grid3-fast: a column of its
+    // pixels along the crease went to the back wall, and it came out 4.4 cm off.)
+    if (params_.ray_fit) {
+      MomentSums first;
+      RaySums first_rays;
+      for (const auto& [i, c, to] : choices) {
+        if (to != 0) continue;
+        const Eigen::Vector3f& pf = pts[i];
+        first.AddPosition(pf.x(), pf.y(), pf.z());
+        const float z = internal::PointDepth(pf, spherical);
+        if (z > 0.0f) first_rays.Add(pf, z, params_.RayFitWeight(z));
+      }
+      auto& ray_planes = ws.candidate_ray_planes;
+      ray_planes.assign(candidates.size(), internal::RayPlane());
+      ray_planes[0] = internal::SolveRegion(first_rays, first);
+      for (std::size_t j = 1; j < candidates.size(); ++j) {
+        const int o = candidates[j];
+        ray_planes[j] = ws.fit_sums[o].k >= 3
+                            ? internal::SolveRegion(ws.fit_rays[o], ws.fit_sums[o])
+                            : internal::SolveRegion(ws.rays[o], ws.regions[o]);
+      }
+      if (ray_planes[0].ok) {
+        for (std::size_t e = 0; e < choices.size(); ++e) {
+          auto& [i, c, to] = choices[e];
+          if (to == -2) continue;  // a pixel of a plane that is no candidate
+          const Eigen::Vector3f& pf = pts[i];
+          const float s = internal::PointDepth(pf, spherical);
+          if (!(s > 0.0f)) continue;
+          const bool own_grid = e < num_own_grid_pixels;
+          if (to < 0) {
+            // Of no plane: to the nearest candidate along the ray within the gate (a pixel of a
+            // grid around only to this plane).
+            double best_offset = internal::kCreaseGateSigmas * params_.Sigma(s);
+            for (int j = 0; j < (own_grid ? num_candidates : 1); ++j) {
+              if (!ray_planes[j].ok) continue;
+              const double offset = internal::RayOffset(pf, s, ray_planes[j]);
+              if (offset < best_offset) {
+                best_offset = offset;
+                to = j;
+              }
+            }
+            continue;
+          }
+          if (!ray_planes[to].ok) continue;
+          // Of a plane: to another whose surface its ray sees (a pixel of a grid around only to
+          // this plane).
+          for (int j = 0; j < (own_grid ? num_candidates : 1); ++j) {
+            if (j == to || !ray_planes[j].ok) continue;
+            if (internal::VisibleHere(pf, s, ray_planes[to], ray_planes[j], params_)) {
+              to = j;
+              break;
+            }
+          }
+        }
+      }
+    }
+    auto& moves = ws.narrow_moves;  // (pixel, its grid, candidate it goes to: 0 itself, -1 none)
+    moves.clear();
+    MomentSums own;
+    for (std::size_t e = 0; e < choices.size(); ++e) {
+      const auto& [i, c, to] = choices[e];
+      const bool own_grid = e < num_own_grid_pixels;
+      if (!own_grid && to != 0) continue;  // a pixel around that stays where it was
+      const Eigen::Vector3f& pf = pts[i];
+      if (to == 0) own.Add(pf.x(), pf.y(), pf.z(), ws.noise_weight[c]);
+      if (!own_grid || to != 0) moves.emplace_back(i, c, to);
     }
     if (own.k < 3) return;  // nothing of its own: it stays as it was
     // Apply: its sums become those of its pixels; the others' gain and lose what moved.
@@ -1151,8 +1227,10 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     // off. A plane too narrow for that (under a quarter of its points left) is fitted to all its
     // grids but those next to another plane (with 6x6 grids the same wall, two or three grids
     // wide, came out 6-11 mm off, noise-free, fitted with the column of grids along its corner),
-    // and one too narrow for that as well keeps them all. Without the grid-level refinement each
-    // plane is fitted to all its grids (no copy).
+    // and one too narrow for that as well keeps them all (or is refined pixel by pixel, from
+    // grid.narrow_refine_points; with grid.refine_interior_fraction, so is a plane of that many
+    // points with less of them interior). Without the grid-level refinement each plane is fitted
+    // to all its grids (no copy).
     if (grid_.refine_grids) {
       ws.fit_sums = ws.regions;
       ws.fit_rays = ws.rays;
@@ -1183,7 +1261,12 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       ws.narrow.assign(num_regions, 0);
       bool any_narrow = false;
       for (std::size_t r = 0; r < num_regions; ++r) {
-        ws.narrow[r] = ws.fit_sums[r].k < 0.25 * ws.regions[r].k;
+        // 1: too narrow for its interior grids; 2: refined pixel by pixel whatever its grids
+        // apart from the other planes hold (refine_interior_fraction).
+        const double interior = ws.fit_sums[r].k, all = ws.regions[r].k;
+        const bool refined_first =
+            interior < grid_.refine_interior_fraction * all && all >= grid_.narrow_refine_points;
+        ws.narrow[r] = refined_first ? 2 : interior < 0.25 * all ? 1 : 0;
         any_narrow |= ws.narrow[r] != 0;
       }
       if (any_narrow) {
@@ -1212,7 +1295,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         bool any_refined = false;
         for (std::size_t r = 0; r < num_regions; ++r) {
           if (!ws.narrow[r]) continue;
-          if (ws.apart_sums[r].k >= 0.25 * ws.regions[r].k) {
+          if (ws.narrow[r] == 1 && ws.apart_sums[r].k >= 0.25 * ws.regions[r].k) {
             ws.fit_sums[r] = ws.apart_sums[r];
             if (params_.ray_fit) ws.fit_rays[r] = ws.apart_rays[r];
           } else {

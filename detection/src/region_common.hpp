@@ -20,6 +20,39 @@ inline float PointDepth(const Eigen::Vector3f& p, bool spherical) {
   return spherical ? p.norm() : p.z();
 }
 
+/// A pixel may change to a neighbouring region only when that region's plane passes within this
+/// many sigma(s) of it along its ray (three sigma of the sensor noise: plausibly its surface).
+constexpr double kCreaseGateSigmas = 3.0;
+
+/// Solves the ray fit of `t` (n = m / |m|, d = 1 / |m| > 0); false when its system is singular
+/// (rays spanning a line) or the result is not finite (the caller keeps the eigen fit).
+bool SolveRayFit(const RaySums& t, Eigen::Vector3d& normal, double& d);
+
+/// A region's plane from the ray fit, and its centroid (which side of another plane it lies on).
+struct RayPlane {
+  bool ok = false;  ///< false: no ray fit (too few pixels, or rays spanning a line)
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+  double d = 0.0;
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+};
+
+/// The ray fit of a region with ray sums `sums` and moments `region` (not ok under 3 points).
+RayPlane SolveRegion(const RaySums& sums, const MomentSums& region);
+
+/// Whether pixel p of region `own` shows region `other`'s surface instead: `other`'s plane is
+/// within kCreaseGateSigmas sigma(s) along the ray, and it is the plane the ray sees where the
+/// two meet. At a concave crease (each region in front of the other's plane, e.g. a wall corner
+/// or a box on the floor) the ray sees the nearer of the two planes; at a convex one (each behind
+/// the other's plane, a box's edge) the farther. Where the regions are neither (planes crossing),
+/// the nearer along the ray to the measured point wins. The planes come from all the regions'
+/// pixels, so where their crease runs is known far better than from any one pixel's depth.
+bool VisibleHere(const Eigen::Vector3f& p, double s, const RayPlane& own, const RayPlane& other,
+                 const DetectionParams& params);
+
+/// How far along its ray (at depth or range s) point p lies from the plane: |s_plane - s|, or
+/// infinity when the ray does not meet the plane in front of the sensor.
+double RayOffset(const Eigen::Vector3f& p, double s, const RayPlane& plane);
+
 /// Where regions meet in a region-index image (-1 = none).
 struct RegionBorders {
   std::vector<std::size_t> pixels;   ///< pixels 4-adjacent to a pixel of another region, once each
