@@ -173,6 +173,28 @@ TEST(EpsilonCountSigmas, BoardTwoCentimetresInFrontOfItsWallStaysApart) {
   }
 }
 
+/// The synthetic room with its right wall turned theta_deg about the vertical through (1.5, 0, 2).
+std::vector<test::GtPlane> RoomWithRightWallTurned(double theta_deg) {
+  auto planes = test::RoomPlanes();
+  const double theta = theta_deg * M_PI / 180.0;
+  const Eigen::Vector3d turned(std::cos(theta), 0, -std::sin(theta));
+  planes[3] = {turned, turned.dot(Eigen::Vector3d(1.5, 0, 2))};
+  return planes;
+}
+
+/// A detector of the narrow-wall sweeps: GBRG with k x k grids (6: grid-fast, -3: grid3-fast) or,
+/// for k = 0, PBRG.
+std::unique_ptr<PlaneDetector> SweepDetector(int k) {
+  if (k == 0) return std::make_unique<PointRegionGrowing>(DetectionParams(), PointParams());
+  DetectionParams params;
+  GridParams grid;
+  grid.cell_size = std::abs(k);
+  if (k == 6) UseFastVariant(params, grid);
+  if (k == -3) UseFast3x3Variant(params, grid);
+  const std::string name = k == 6 ? "grid-fast" : k == -3 ? "grid3-fast" : "";
+  return std::make_unique<GridRegionGrowing>(params, grid, name);
+}
+
 TEST(KnownAnswers, NarrowGrazingWallWhereverItFalls) {
   // The room's right wall turned from 20 to 23.5 deg about the vertical, rendered 630 to 650 px
   // wide: seen ever more edge-on, it narrows to 6-9 px at the back (2300-8600 px in all), and
@@ -182,22 +204,11 @@ TEST(KnownAnswers, NarrowGrazingWallWhereverItFalls) {
   // back wall: fitted and labelled by whole grids, it came out 2.6 cm to 0.9 m off, or mostly
   // missed, on 4 of these 36 renders, until such planes got the pixel-level refinement.)
   for (const double theta_deg : {20.0, 21.0, 22.0, 22.5, 23.0, 23.5}) {
-    auto planes = test::RoomPlanes();
-    const double theta = theta_deg * M_PI / 180.0;
-    const Eigen::Vector3d turned(std::cos(theta), 0, -std::sin(theta));
-    planes[3] = {turned, turned.dot(Eigen::Vector3d(1.5, 0, 2))};
+    const auto planes = RoomWithRightWallTurned(theta_deg);
     for (int width = 630; width <= 650; width += 4) {
       const auto frame = test::RenderScene(planes, 0.0, 1, width, 480);
-      for (const int k : {3, 5, 6, -3, 0}) {  // 6: grid-fast; -3: grid3-fast; 0: PBRG
-        DetectionParams params;
-        GridParams grid;
-        grid.cell_size = std::abs(k);
-        if (k == 6) UseFastVariant(params, grid);
-        if (k == -3) UseFast3x3Variant(params, grid);
-        const std::string name = k == 6 ? "grid-fast" : k == -3 ? "grid3-fast" : "";
-        const std::unique_ptr<PlaneDetector> detector =
-            k != 0 ? std::unique_ptr<PlaneDetector>(new GridRegionGrowing(params, grid, name))
-                   : std::unique_ptr<PlaneDetector>(new PointRegionGrowing(params, PointParams()));
+      for (const int k : {3, 5, 6, -3, 0}) {
+        const std::unique_ptr<PlaneDetector> detector = SweepDetector(k);
         test::ExpectPlanesFound(frame, detector->Detect(frame.cloud), 2000, 0.5, 0.005,
                                 detector->Name() + " wall at " + std::to_string(theta_deg) +
                                     " deg, " + std::to_string(width) + " px");
@@ -216,21 +227,11 @@ TEST(KnownAnswers, NarrowGrazingWallWithKinectNoise) {
   // under half, grid3-fast's 2.1-4.4 cm on three renders. grid5 (its wall mostly missed on 2)
   // and grid-fast (6) do not pass: their grids are as wide as the wall.
   for (const double theta_deg : {20.0, 21.0, 22.0, 22.5, 23.0, 23.5}) {
-    auto planes = test::RoomPlanes();
-    const double theta = theta_deg * M_PI / 180.0;
-    const Eigen::Vector3d turned(std::cos(theta), 0, -std::sin(theta));
-    planes[3] = {turned, turned.dot(Eigen::Vector3d(1.5, 0, 2))};
+    const auto planes = RoomWithRightWallTurned(theta_deg);
     for (int width = 630; width <= 650; width += 4) {
       const auto frame = test::RenderScene(planes, kKinectNoise, width, width, 480);
-      for (const int k : {3, 4, -3, 0}) {  // -3: grid3-fast; 0: PBRG
-        DetectionParams params;
-        GridParams grid;
-        grid.cell_size = std::abs(k);
-        if (k == -3) UseFast3x3Variant(params, grid);
-        const std::unique_ptr<PlaneDetector> detector =
-            k != 0 ? std::unique_ptr<PlaneDetector>(
-                         new GridRegionGrowing(params, grid, k == -3 ? "grid3-fast" : ""))
-                   : std::unique_ptr<PlaneDetector>(new PointRegionGrowing(params, PointParams()));
+      for (const int k : {3, 4, -3, 0}) {
+        const std::unique_ptr<PlaneDetector> detector = SweepDetector(k);
         test::ExpectPlanesFound(frame, detector->Detect(frame.cloud), 2000, 2.0, 0.02,
                                 detector->Name() + " wall at " + std::to_string(theta_deg) +
                                     " deg, " + std::to_string(width) + " px");
