@@ -12,7 +12,10 @@
 #include "planeslam/detection/plane_covariance.hpp"
 
 namespace planeslam::detection::internal {
+namespace {
 
+/// Solves the ray fit (n = m / |m|, d = 1 / |m| > 0); false when its system is singular (rays
+/// spanning a line) or the result is not finite (the caller keeps the eigen fit).
 bool SolveRayFit(const RaySums& t, Eigen::Vector3d& normal, double& d) {
   Eigen::Matrix3d A;
   A << t.a00, t.a01, t.a02, t.a01, t.a11, t.a12, t.a02, t.a12, t.a22;
@@ -28,6 +31,8 @@ bool SolveRayFit(const RaySums& t, Eigen::Vector3d& normal, double& d) {
   d = 1.0 / len;
   return true;
 }
+
+}  // namespace
 
 RayPlane SolveRegion(const RaySums& sums, const MomentSums& region) {
   RayPlane plane;

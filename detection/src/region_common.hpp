@@ -24,10 +24,6 @@ inline float PointDepth(const Eigen::Vector3f& p, bool spherical) {
 /// many sigma(s) of it along its ray (three sigma of the sensor noise: plausibly its surface).
 constexpr double kCreaseGateSigmas = 3.0;
 
-/// Solves the ray fit of `t` (n = m / |m|, d = 1 / |m| > 0); false when its system is singular
-/// (rays spanning a line) or the result is not finite (the caller keeps the eigen fit).
-bool SolveRayFit(const RaySums& t, Eigen::Vector3d& normal, double& d);
-
 /// A region's plane from the ray fit, and its centroid (which side of another plane it lies on).
 struct RayPlane {
   bool ok = false;  ///< false: no ray fit (too few pixels, or rays spanning a line)

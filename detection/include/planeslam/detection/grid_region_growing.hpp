@@ -67,8 +67,9 @@ struct GridParams {
   /// grids hold under this fraction of its points gets that pixel-level refinement as well,
   /// instead of a fit to its interior grids or to its grids apart from the other planes (0 =
   /// only the planes too narrow for both). Such fits keep the near, wide end of a plane seen
-  /// along (the synthetic room's right wall turned 22 deg, 630-634 px wide, Kinect noise,
-  /// grid3-fast: 2.1-2.7 cm off from 1134 of its 2313 px).
+  /// along (the synthetic room's right wall turned 22 deg, Kinect noise, grid3-fast: 2.7 cm off
+  /// fitted to 1134 of its 2313 px, 630 px wide; 2.1 cm off fitted to the third of its 3447 px in
+  /// interior grids, 634 px wide).
   double refine_interior_fraction = 0.0;
 
   int EffectiveMu() const { return mu > 0 ? mu : cell_size * cell_size - cell_size + 1; }
