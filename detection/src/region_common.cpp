@@ -32,6 +32,15 @@ bool SolveRayFit(const RaySums& t, Eigen::Vector3d& normal, double& d) {
   return true;
 }
 
+/// The depth (or range) s_plane at which the ray of point p, measured at s, meets the plane;
+/// false when it does not meet the plane in front of the sensor.
+bool DepthOnPlane(const Eigen::Vector3d& p, double s, const RayPlane& plane, double& s_plane) {
+  const double np = plane.normal.dot(p);
+  if (!(np > 0.0)) return false;
+  s_plane = plane.d * s / np;
+  return true;
+}
+
 }  // namespace
 
 RayPlane SolveRegion(const RaySums& sums, const MomentSums& region) {
@@ -46,14 +55,11 @@ bool VisibleHere(const Eigen::Vector3f& p, double s, const RayPlane& own, const 
   const Eigen::Vector3d pd = p.cast<double>();
   // Depths at which the pixel's ray meets each plane; the gate on `other`'s first, which turns
   // most pixels away before `own`'s is worked out.
-  const double np_other = other.normal.dot(pd);
-  if (!(np_other > 0.0)) return false;
-  const double s_other = other.d * s / np_other;
+  double s_other, s_own;
+  if (!DepthOnPlane(pd, s, other, s_other)) return false;
   const double sigma = params.Sigma(s);
   if (sigma > 0.0 && std::abs(s_other - s) > kCreaseGateSigmas * sigma) return false;
-  const double np_own = own.normal.dot(pd);
-  if (!(np_own > 0.0)) return false;
-  const double s_own = own.d * s / np_own;
+  if (!DepthOnPlane(pd, s, own, s_own)) return false;
   // Signed offsets of each region's centroid from the other's plane (< 0: on the sensor side).
   const double own_vs_other = other.normal.dot(own.centroid) - other.d;
   const double other_vs_own = own.normal.dot(other.centroid) - own.d;
@@ -63,9 +69,11 @@ bool VisibleHere(const Eigen::Vector3f& p, double s, const RayPlane& own, const 
 }
 
 double RayOffset(const Eigen::Vector3f& p, double s, const RayPlane& plane) {
-  const double np = plane.normal.dot(p.cast<double>());
-  if (!(np > 0.0)) return std::numeric_limits<double>::infinity();
-  return std::abs(plane.d * s / np - s);
+  double s_plane;
+  if (!DepthOnPlane(p.cast<double>(), s, plane, s_plane)) {
+    return std::numeric_limits<double>::infinity();
+  }
+  return std::abs(s_plane - s);
 }
 
 namespace {
