@@ -103,6 +103,12 @@ void VisitGrid(FieldVisitor& v, detection::GridParams& c) {
           "interior grids hold under this fraction of its points is refined pixel by pixel too "
           "(0 = only planes too narrow for any whole-grid fit)",
           0.0, 1.0);
+  v.Field("border_grid_mu", c.border_grid_mu,
+          "a grid cut by the image's right or bottom border is sparse below mu scaled by its "
+          "share of a k x k grid (else below mu)");
+  v.Field("regrow_left_out", c.regrow_left_out,
+          "after growth, the grids of regions too small to be planes that fit no plane next to "
+          "them seed and grow a second time, among themselves");
 }
 
 std::vector<std::string> ValidateGrid(const detection::GridParams& c) { return c.Validate(); }

@@ -65,6 +65,10 @@ struct Workspace {
   std::vector<int> queue;
   std::vector<int> members;
   std::vector<std::uint64_t> seeds;
+  std::vector<std::uint64_t> seed_keys;  ///< each planar grid's seed key (regrow_left_out)
+  std::vector<int> left_out;             ///< the grids of R' after the first growth (ditto)
+  std::vector<FastFit> region_fits;      ///< the planes' fits after it (ditto)
+  std::vector<std::uint8_t> region_fitted;
   std::vector<MomentSums> regions;
   std::vector<FastFit> fits;
   std::vector<float> plane_nd;  ///< each region's n, d in float (pixel-level refinement)
@@ -137,6 +141,8 @@ void UseFastVariant(DetectionParams& params, GridParams& grid) {
   grid.cell_size = 6;
   grid.mu = 0;  // the automatic k^2 - k + 1
   UseGridLevelPipeline(params, grid);
+  grid.border_grid_mu = true;
+  grid.regrow_left_out = true;
 }
 
 void UseFast3x3Variant(DetectionParams& params, GridParams& grid) {
@@ -202,11 +208,19 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // ---- 2. Shape classification (Section III-A) and the planar grids' planes, of the grids in
   // [begin, end).
   const double mu = grid_.EffectiveMu();
+  // The least points of a non-sparse grid at grid column cx, row cy: mu, or with border_grid_mu,
+  // mu scaled by the share of a k x k grid that a grid cut by the image border covers.
+  auto mu_of = [&](int cx, int cy) {
+    if (!grid_.border_grid_mu) return mu;
+    const int w = std::min(k, width - cx * k), h = std::min(k, height - cy * k);
+    return std::max(3.0, std::ceil(mu * w * h / (k * k)));
+  };
   const double eta = params_.eta_deg * M_PI / 180.0;
   const double cos_eta = std::cos(eta);
   ws.classes.assign(num_cells, CellClass::kSparse);
   ws.info.resize(num_cells);
   ws.seeds.clear();
+  if (grid_.regrow_left_out) ws.seed_keys.resize(num_cells);
   // Seed key: the MSE as a float's bit pattern (monotonic for non-negative floats) above the grid
   // index, so one sort of 64-bit keys gives the order a min-heap of (MSE, index) would pop.
   auto seed_key = [](double mse, int c) {
@@ -226,14 +240,17 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   }
   for (auto& column : ws.v1) column.resize(kClassifyChunk);
   for (auto& column : ws.dense_w) column.resize(kClassifyChunk);
+  // classify runs on one row of grids at a time: its mu, and that of its last grid.
   auto classify = [&](int begin, int end) {
+    const int cy = grid_xy(begin).second;
+    const double row_mu = mu_of(0, cy), last_mu = mu_of(cells_x - 1, cy);
     for (int next = begin; next < end;) {
       // The non-sparse grids listed without a branch per grid (which ones are is data).
       int num_dense = 0;
       int* const dense = ws.dense.data();
       for (; next < end && num_dense < kClassifyChunk; ++next) {
         dense[num_dense] = next;
-        num_dense += ws.counts[next] >= mu;  // else sparse
+        num_dense += ws.counts[next] >= (next + 1 == end ? last_mu : row_mu);  // else sparse
       }
       for (int j = 0; j < num_dense; ++j) {
         const MomentSums& s = ws.sums[ws.dense[j]];
@@ -336,10 +353,12 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
           // (far away, where a fluke can give a tiny MSE with a random normal) seed last.
           const double seed_tilt = std::min(1.0, tilt);
           ws.seeds.push_back(seed_key(mse + iso * seed_tilt * seed_tilt, c));
+          if (grid_.regrow_left_out) ws.seed_keys[c] = ws.seeds.back();
         } else {
           ci.n = (e.v1.dot(centre) < 0 ? Eigen::Vector3d(-e.v1) : e.v1).cast<float>();
           ci.cos_tol = static_cast<float>(cos_eta);
           ws.seeds.push_back(seed_key(mse, c));  // Algorithm 2 line 4: minimal MSE first
+          if (grid_.regrow_left_out) ws.seed_keys[c] = ws.seeds.back();
         }
       }
     }
@@ -382,6 +401,18 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
 
   ws.partly_valid.resize(num_partly_valid);
 
+  // A grid's MSE about plane f in units of its tolerance there, refine_sigmas^2 times its
+  // expected MSE along the normal (depth model) or gamma^2 (constant model): under 1, it fits.
+  const double refine2 = params_.refine_sigmas * params_.refine_sigmas;
+  auto grid_fit_ratio = [&](const MomentSums& g, const FastFit& f) {
+    double nqn, ns;  // the grid's squared distances to the plane: nqn - 2 d ns + K d^2
+    g.AlongNormal(f.normal, nqn, ns);
+    const double mse = std::max(0.0, nqn - 2.0 * f.d * ns + g.k * f.d * f.d) / g.k;
+    const double tolerance2 =
+        depth_model ? refine2 * g.ExpectedMse(f.normal) : params_.gamma * params_.gamma;
+    return mse / std::max(tolerance2, 1e-18);
+  };
+
   // ---- 3. Region growing (Algorithm 2): seeds in order of grid MSE, BFS over 4-neighbours.
   const auto t2 = Clock::now();
   ws.cell_region.assign(num_cells, -1);
@@ -390,6 +421,8 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     ws.mark[c] = ws.classes[c] == CellClass::kPlanar ? -1 : kTaken;
   }
   ws.regions.clear();
+  ws.left_out.clear();
+  bool second_growth = false;                             // regrow_left_out's second pass
   const bool adaptive_refit = grid_.refit_interval != 1;  // else the paper's refit per join
   const std::size_t theta_grids = static_cast<std::size_t>((params_.theta + k * k - 1) / (k * k));
   // A grid is queued at most once for each neighbour that joins the region (then taken, or
@@ -529,8 +562,12 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     } else {
       // R' (Algorithm 2 line 15): these grids leave G, as in the paper: they neither seed nor join
       // later regions (letting later regions re-grow into them made the growth quadratic on
-      // cluttered scans). Boundary refinement may still give their pixels to a plane.
+      // cluttered scans). Boundary refinement may still give their pixels to a plane, and with
+      // regrow_left_out they grow once more after all seeds (below).
       for (int c : ws.members) ws.cell_region[c] = -1;
+      if (grid_.regrow_left_out && !second_growth) {
+        ws.left_out.insert(ws.left_out.end(), ws.members.begin(), ws.members.end());
+      }
     }
   };
   // Seeds in key order. Most grids join one of the first regions, so instead of sorting every key
@@ -573,6 +610,39 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     for (; next < end; ++next) {
       const int seed = static_cast<int>(seeds[next] & 0xffffffffu);
       if (ws.mark[seed] != kTaken) grow_from(seed);  // else already in R or R'
+    }
+  }
+  // regrow_left_out: the grids of R' that fit none of the planes around them (3 x 3 grids; the
+  // planes as grown, fixed during the pass) seed and grow again, in seed order; every other grid
+  // is taken now, so they grow among themselves only. The rest stay out (the grid-level
+  // refinement may give them to the plane they fit).
+  if (grid_.regrow_left_out && !ws.left_out.empty()) {
+    second_growth = true;
+    ws.region_fits.resize(ws.regions.size());
+    ws.region_fitted.assign(ws.regions.size(), 0);
+    seeds.clear();
+    for (const int c : ws.left_out) {
+      const auto [cx, cy] = grid_xy(c);
+      bool fits_a_plane = false;
+      for (int i = 0; i < 9 && !fits_a_plane; ++i) {
+        const int x = cx + i % 3 - 1, y = cy + i / 3 - 1;
+        if (x < 0 || y < 0 || x >= cells_x || y >= cells_y) continue;
+        const int r = ws.cell_region[y * cells_x + x];
+        if (r < 0) continue;
+        if (!ws.region_fitted[r]) {
+          ws.region_fits[r] = FitSums(ws.regions[r]);
+          ws.region_fitted[r] = 1;
+        }
+        fits_a_plane = grid_fit_ratio(ws.sums[c], ws.region_fits[r]) < 1.0;
+      }
+      if (fits_a_plane) continue;
+      ws.mark[c] = -1;
+      seeds.push_back(ws.seed_keys[c]);
+    }
+    std::sort(seeds.begin(), seeds.end());
+    for (const std::uint64_t key : seeds) {
+      const int seed = static_cast<int>(key & 0xffffffffu);
+      if (ws.mark[seed] != kTaken) grow_from(seed);
     }
   }
 
@@ -661,7 +731,6 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   auto refine_edge_grids = [&] {
     ws.fits.resize(num_regions);
     for (std::size_t i = 0; i < num_regions; ++i) ws.fits[i] = FitSums(ws.regions[i]);
-    const double refine2 = params_.refine_sigmas * params_.refine_sigmas;
     ws.grid_moves.clear();
     // Each plane once among a grid's candidates, without a data-dependent branch: a plane is new
     // to edge grid e while its stamp is not e + 1 (stamp 0 stands for no plane, never new).
@@ -680,7 +749,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       const MomentSums& g = ws.sums[c];
       const auto [cx, cy] = grid_xy(c);
       const int own = ws.cell_region[c];
-      if (own < 0 && ws.counts[c] < mu) continue;  // too few points to tell a fit
+      if (own < 0 && ws.counts[c] < mu_of(cx, cy)) continue;  // too few points to tell a fit
       // The planes of the 3 x 3 grids around, each once (bounds checks only at the image border).
       std::int32_t around[9];
       if (cx > 0 && cy > 0 && cx + 1 < cells_x && cy + 1 < cells_y) {
@@ -708,13 +777,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       double best_ratio = 1.0;  // beyond tolerance: no plane
       for (int i = 0; i < num_candidates; ++i) {
         const int r = candidates[i];
-        const FastFit& f = ws.fits[r];
-        double nqn, ns;  // the grid's squared distances to the plane: nqn - 2 d ns + K d^2
-        g.AlongNormal(f.normal, nqn, ns);
-        const double mse = std::max(0.0, nqn - 2.0 * f.d * ns + g.k * f.d * f.d) / g.k;
-        const double tolerance2 =
-            depth_model ? refine2 * g.ExpectedMse(f.normal) : params_.gamma * params_.gamma;
-        const double ratio = mse / std::max(tolerance2, 1e-18);
+        const double ratio = grid_fit_ratio(g, ws.fits[r]);
         // The lower region index wins a tie, whatever the visiting order.
         if (ratio < best_ratio || (ratio == best_ratio && best >= 0 && r < best)) {
           best_ratio = ratio;

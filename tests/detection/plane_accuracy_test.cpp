@@ -224,13 +224,15 @@ TEST(KnownAnswers, NarrowGrazingWallWithKinectNoise) {
   // ray_fit), and so were the pixels chosen against it: before pixels of no plane were asked
   // again along the rays, grid3's wall came out 2.8 cm off at 23 deg, 638 px; before narrow
   // planes chose their pixels a second time along the rays and were refined from an interior of
-  // under half, grid3-fast's 2.1-4.4 cm on three renders. grid5 (its wall mostly missed on 2)
-  // and grid-fast (6) do not pass: their grids are as wide as the wall.
+  // under half, grid3-fast's 2.1-4.4 cm on three renders; before border grids had a scaled mu
+  // and the grids left out grew a second time, grid-fast's wall was mostly missed or 2-14 cm off
+  // on 6. grid5 (its wall mostly missed on 2, without those two) does not pass: its grids are
+  // about as wide as the wall.
   for (const double theta_deg : {20.0, 21.0, 22.0, 22.5, 23.0, 23.5}) {
     const auto planes = RoomWithRightWallTurned(theta_deg);
     for (int width = 630; width <= 650; width += 4) {
       const auto frame = test::RenderScene(planes, kKinectNoise, width, width, 480);
-      for (const int k : {3, 4, -3, 0}) {
+      for (const int k : {3, 4, 6, -3, 0}) {
         const std::unique_ptr<PlaneDetector> detector = SweepDetector(k);
         test::ExpectPlanesFound(frame, detector->Detect(frame.cloud), 2000, 2.0, 0.02,
                                 detector->Name() + " wall at " + std::to_string(theta_deg) +

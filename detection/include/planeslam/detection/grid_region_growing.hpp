@@ -26,7 +26,7 @@
 ///    when another of its neighbours joins (the region's plane has changed since). Regions of >=
 ///    ceil(theta / k^2) grids are planes; the grids of smaller (uncertain) regions leave G as in
 ///    the paper: they neither seed nor join later regions (their pixels may still be given to a
-///    plane by the refinement).
+///    plane by the refinement; regrow_left_out grows those that fit no plane once more).
 /// 4. Beyond the paper (both optional, on by default): boundary refinement gives each valid pixel
 ///    of a grid outside every plane, with a plane among its 8 neighbour grids, to the best-fitting
 ///    such plane when |n.p - d| < gamma(z) (with refine_sigmas); then adjacent regions describing
@@ -71,6 +71,19 @@ struct GridParams {
   /// fitted to 1134 of its 2313 px, 630 px wide; 2.1 cm off fitted to the third of its 3447 px in
   /// interior grids, 634 px wide).
   double refine_interior_fraction = 0.0;
+  /// A grid cut by the image's right or bottom border (width or height not a multiple of k) is
+  /// sparse below mu scaled by its share of a k x k grid, instead of below mu itself, which it may
+  /// not even hold (640 px wide with 6x6 grids: the last column is 4 px wide, 24 px against mu
+  /// 31, so whatever it shows belongs to no plane without the pixel-level refinement).
+  bool border_grid_mu = false;
+  /// After growth, the grids of regions too small to be planes (R', which leave G in the paper)
+  /// that fit none of the planes next to them (the grid-level refinement's test) seed and grow a
+  /// second time, among themselves, in seed order. A far wall seen edge-on and as narrow as a
+  /// grid has the smallest grid MSEs (its noise lies along it), so it seeds before the wall
+  /// behind; with a normal not yet resolved, its regions take that wall's grids by the MSE test
+  /// alone and stay under theta. After the wall behind has grown, only its own grids are left to
+  /// it.
+  bool regrow_left_out = false;
 
   int EffectiveMu() const { return mu > 0 ? mu : cell_size * cell_size - cell_size + 1; }
   std::vector<std::string> Validate() const;
@@ -83,7 +96,11 @@ struct GridParams {
 /// narrow for any such fit (a column or two of grids) gets the pixel-level refinement on its
 /// grids and those around them. Merging and the ray fit stay as set.
 void UseGridLevelPipeline(DetectionParams& params, GridParams& grid);
-/// Method `grid-fast`: the grid-level pipeline with 6x6 grids.
+/// Method `grid-fast`: the grid-level pipeline with 6x6 grids, as wide as a far wall seen
+/// edge-on: border grids with a scaled mu (border_grid_mu) and a second growth of the grids
+/// left out (regrow_left_out). Without them, the synthetic room's right wall turned 20-23.5 deg
+/// with Kinect noise (6-10 px wide at 3.5-3.8 m) was mostly missed or 2-14 cm off on 6 of the 30
+/// renders where it has 2000 px or more.
 void UseFastVariant(DetectionParams& params, GridParams& grid);
 /// Method `grid3-fast`: the grid-level pipeline with the paper's 3x3 grids. A narrow plane's
 /// whole 3x3 grids hold about half of it (the room's noise-free right wall turned 23 deg:
