@@ -67,8 +67,7 @@ struct Workspace {
   std::vector<std::uint64_t> seeds;
   std::vector<std::uint64_t> seed_keys;  ///< each planar grid's seed key (regrow_left_out)
   std::vector<int> left_out;             ///< the grids of R' after the first growth (ditto)
-  std::vector<FastFit> region_fits;      ///< the planes' fits after it (ditto)
-  std::vector<std::uint8_t> region_fitted;
+  std::vector<std::uint8_t> region_fitted;  ///< whether fits holds a plane's fit yet (ditto)
   std::vector<MomentSums> regions;
   std::vector<FastFit> fits;
   std::vector<float> plane_nd;  ///< each region's n, d in float (pixel-level refinement)
@@ -413,6 +412,12 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     return mse / std::max(tolerance2, 1e-18);
   };
 
+  // The region of the grid at column cx, row cy (-1: none, or outside the image).
+  auto region_at = [&](int cx, int cy) {
+    return cx >= 0 && cy >= 0 && cx < cells_x && cy < cells_y ? ws.cell_region[cy * cells_x + cx]
+                                                              : -1;
+  };
+
   // ---- 3. Region growing (Algorithm 2): seeds in order of grid MSE, BFS over 4-neighbours.
   const auto t2 = Clock::now();
   ws.cell_region.assign(num_cells, -1);
@@ -615,25 +620,24 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // regrow_left_out: the grids of R' that fit none of the planes around them (3 x 3 grids; the
   // planes as grown, fixed during the pass) seed and grow again, in seed order; every other grid
   // is taken now, so they grow among themselves only. The rest stay out (the grid-level
-  // refinement may give them to the plane they fit).
+  // refinement may give them to the plane they fit). The planes are fitted as needed, into the
+  // refinement's ws.fits (which refits every plane).
   if (grid_.regrow_left_out && !ws.left_out.empty()) {
     second_growth = true;
-    ws.region_fits.resize(ws.regions.size());
+    ws.fits.resize(ws.regions.size());
     ws.region_fitted.assign(ws.regions.size(), 0);
     seeds.clear();
     for (const int c : ws.left_out) {
       const auto [cx, cy] = grid_xy(c);
       bool fits_a_plane = false;
       for (int i = 0; i < 9 && !fits_a_plane; ++i) {
-        const int x = cx + i % 3 - 1, y = cy + i / 3 - 1;
-        if (x < 0 || y < 0 || x >= cells_x || y >= cells_y) continue;
-        const int r = ws.cell_region[y * cells_x + x];
+        const int r = region_at(cx + i % 3 - 1, cy + i / 3 - 1);
         if (r < 0) continue;
         if (!ws.region_fitted[r]) {
-          ws.region_fits[r] = FitSums(ws.regions[r]);
+          ws.fits[r] = FitSums(ws.regions[r]);
           ws.region_fitted[r] = 1;
         }
-        fits_a_plane = grid_fit_ratio(ws.sums[c], ws.region_fits[r]) < 1.0;
+        fits_a_plane = grid_fit_ratio(ws.sums[c], ws.fits[r]) < 1.0;
       }
       if (fits_a_plane) continue;
       ws.mark[c] = -1;
@@ -653,10 +657,6 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // a plane (all 8 neighbours in its own plane). Only they can hold a pixel whose plane differs
   // from a 4-neighbour's, so the refinement, the merge's adjacency and the crease pixels of the
   // ray fit look at them only.
-  auto region_at = [&](int cx, int cy) {
-    return cx >= 0 && cy >= 0 && cx < cells_x && cy < cells_y ? ws.cell_region[cy * cells_x + cx]
-                                                              : -1;
-  };
   auto is_edge_at_border = [&](int cx, int cy) {  // with bounds checks
     const std::int32_t own = region_at(cx, cy);
     bool interior = own >= 0, any_plane = own >= 0;
