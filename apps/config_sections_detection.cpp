@@ -109,6 +109,11 @@ void VisitGrid(FieldVisitor& v, detection::GridParams& c) {
   v.Field("regrow_left_out", c.regrow_left_out,
           "after growth, the grids of regions too small to be planes that fit no plane next to "
           "them seed and grow a second time, among themselves");
+  v.Field("narrow_passes", c.narrow_passes,
+          "with grid.refine_grids: up to this many more passes of the grid-level refinement over "
+          "the grids at a narrow plane (its edge grids hold over 3/4 of its points), while grids "
+          "move",
+          0, 64);
 }
 
 std::vector<std::string> ValidateGrid(const detection::GridParams& c) { return c.Validate(); }

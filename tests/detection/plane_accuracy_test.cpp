@@ -8,6 +8,7 @@
 #include <cmath>
 #include <memory>
 #include <string>
+#include <utility>
 
 #include "detection_checks.hpp"
 #include "planeslam/detection/grid_region_growing.hpp"
@@ -237,6 +238,32 @@ TEST(KnownAnswers, NarrowGrazingWallWithKinectNoise) {
         test::ExpectPlanesFound(frame, detector->Detect(frame.cloud), 2000, 2.0, 0.02,
                                 detector->Name() + " wall at " + std::to_string(theta_deg) +
                                     " deg, " + std::to_string(width) + " px");
+      }
+    }
+  }
+}
+
+TEST(KnownAnswers, NarrowGrazingWallOverTenNoiseDraws) {
+  // The three renders where the grid-level pipeline lost the narrow wall most often, each with
+  // ten noise draws (a sweep of 2310 noisy renders, 19-24 deg by 0.25 deg, 630-650 px by 2 px,
+  // ten draws each, found grid-fast off on 27, 23 of them these 30). At 23 deg, 638 px its
+  // narrow-plane refinement chose a column of the back wall along the crease against its tilted
+  // own fit and kept it (2.0-3.0 cm off on 7 draws), until its own plane was fitted to the 2 x 2
+  // pixel blocks that fit it best; at 23.75 deg, 646 and 650 px, the wall was one column of
+  // grids, cut into pieces by grids the growth refused (650 px: three planes, one 0.8 deg off)
+  // or holding grids of the back wall as well (646 px: up to 2.6 deg off), until
+  // grid.narrow_passes. grid3-fast shares that refinement.
+  const std::pair<double, int> renders[] = {{23.0, 638}, {23.75, 646}, {23.75, 650}};
+  for (const auto& [theta_deg, width] : renders) {
+    const auto planes = RoomWithRightWallTurned(theta_deg);
+    for (unsigned draw = 0; draw < 10; ++draw) {
+      const auto frame = test::RenderScene(planes, kKinectNoise, width + 1000 * draw, width, 480);
+      for (const int k : {6, -3}) {
+        const std::unique_ptr<PlaneDetector> detector = SweepDetector(k);
+        test::ExpectPlanesFound(frame, detector->Detect(frame.cloud), 2000, 2.0, 0.02,
+                                detector->Name() + " wall at " + std::to_string(theta_deg) +
+                                    " deg, " + std::to_string(width) + " px, draw " +
+                                    std::to_string(draw));
       }
     }
   }

@@ -84,6 +84,15 @@ struct GridParams {
   /// alone and stay under theta. After the wall behind has grown, only its own grids are left to
   /// it.
   bool regrow_left_out = false;
+  /// With the grid-level refinement: up to this many more passes of it, while grids move, over
+  /// the grids in and next to a narrow plane (one whose edge grids hold over 3/4 of its points),
+  /// each moving grids into or out of a narrow plane only. One pass gives a plane only the grids
+  /// next to it as grown and judges them against its fit as grown: a wall seen edge-on as narrow
+  /// as a grid stays in pieces across grids the growth refused, or keeps the grids of the wall
+  /// behind it that tilted it (the synthetic room's right wall turned 23.75 deg with Kinect
+  /// noise, 6x6 grids: 0.3-2.6 deg off, or mostly missed, on 16 of 20 noise draws at 646 and 650
+  /// px wide). The planes are refitted between passes.
+  int narrow_passes = 0;
 
   int EffectiveMu() const { return mu > 0 ? mu : cell_size * cell_size - cell_size + 1; }
   std::vector<std::string> Validate() const;
@@ -97,10 +106,12 @@ struct GridParams {
 /// grids and those around them. Merging and the ray fit stay as set.
 void UseGridLevelPipeline(DetectionParams& params, GridParams& grid);
 /// Method `grid-fast`: the grid-level pipeline with 6x6 grids, as wide as a far wall seen
-/// edge-on: border grids with a scaled mu (border_grid_mu) and a second growth of the grids
-/// left out (regrow_left_out). Without them, the synthetic room's right wall turned 20-23.5 deg
-/// with Kinect noise (6-10 px wide at 3.5-3.8 m) was mostly missed or 2-14 cm off on 6 of the 30
-/// renders where it has 2000 px or more.
+/// edge-on: border grids with a scaled mu (border_grid_mu), a second growth of the grids left
+/// out (regrow_left_out) and 3 more refinement passes at narrow planes (narrow_passes). Without
+/// the first two, the synthetic room's right wall turned 20-23.5 deg with Kinect noise (6-10 px
+/// wide at 3.5-3.8 m) was mostly missed or 2-14 cm off on 6 of the 30 renders where it has 2000
+/// px or more; without the third, on 21 of 2310 renders of 19-24 deg and 630-650 px (ten noise
+/// draws each), with it on 1 (as grid3-fast).
 void UseFastVariant(DetectionParams& params, GridParams& grid);
 /// Method `grid3-fast`: the grid-level pipeline with the paper's 3x3 grids. A narrow plane's
 /// whole 3x3 grids hold about half of it (the room's noise-free right wall turned 23 deg:
