@@ -736,7 +736,12 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // pixels assigned); a grid that straddles two surfaces fits neither within tolerance and stays
   // out. Candidate planes are those grown in step 3, fixed during the pass, and the moves are
   // applied after it, so the result does not depend on grid order.
-  bool narrow_pass = false;  // a pass of narrow_passes: only the grids at a narrow plane
+  // A plane whose interior grids (all 8 neighbours in it) hold under a quarter of its points: too
+  // narrow for a fit to them (see the fits of the grid-level pipeline below), and refined again
+  // by grid.narrow_passes.
+  auto too_narrow_for_interior_fit = [](double interior_points, double all_points) {
+    return interior_points < 0.25 * all_points;
+  };
   // Which planes' fits in ws.fits are out of date (they gained or lost grids since).
   ws.fit_stale.assign(num_regions, 1);
   ws.fits.resize(num_regions);
@@ -747,7 +752,9 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       ws.fit_stale[i] = 0;
     }
   };
-  auto refine_edge_grids = [&] {
+  // narrow_only (a pass of grid.narrow_passes): only the grids at a narrow plane
+  // (ws.at_narrow_plane), and only moves into or out of one (ws.is_narrow).
+  auto refine_edge_grids = [&](bool narrow_only) {
     refit_stale();
     ws.grid_moves.clear();
     // Each plane once among a grid's candidates, without a data-dependent branch: a plane is new
@@ -767,7 +774,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       const MomentSums& g = ws.sums[c];
       const auto [cx, cy] = grid_xy(c);
       const int own = ws.cell_region[c];
-      if (narrow_pass && !ws.at_narrow_plane[c]) continue;
+      if (narrow_only && !ws.at_narrow_plane[c]) continue;
       if (own < 0 && ws.counts[c] < mu_of(cx, cy)) continue;  // too few points to tell a fit
       // The planes of the 3 x 3 grids around, each once (bounds checks only at the image border).
       std::int32_t around[9];
@@ -804,8 +811,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         }
       }
       if (best < 0 || best == own) continue;
-      // A pass of narrow_passes moves grids into or out of a narrow plane only.
-      if (narrow_pass && !ws.is_narrow[best] && !(own >= 0 && ws.is_narrow[own])) continue;
+      if (narrow_only && !ws.is_narrow[best] && !(own >= 0 && ws.is_narrow[own])) continue;
       ws.grid_moves.emplace_back(c, best);
     }
     for (const auto& [c, to] : ws.grid_moves) {
@@ -819,7 +825,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     }
     return !ws.grid_moves.empty();
   };
-  if (grid_.refine_grids && num_regions > 0 && refine_edge_grids()) {
+  if (grid_.refine_grids && num_regions > 0 && refine_edge_grids(false)) {
     find_edge_grids();
     // narrow_passes: the refinement again, around the narrow planes only, while grids move.
     for (int pass = 0; pass < grid_.narrow_passes; ++pass) {
@@ -831,7 +837,8 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       ws.is_narrow.assign(num_regions, 0);
       bool any_narrow = false;
       for (std::size_t r = 0; r < num_regions; ++r) {
-        ws.is_narrow[r] = ws.edge_points[r] > 0.75 * ws.regions[r].k;
+        const double all = ws.regions[r].k;
+        ws.is_narrow[r] = too_narrow_for_interior_fit(all - ws.edge_points[r], all);
         any_narrow |= ws.is_narrow[r] != 0;
       }
       if (!any_narrow) break;
@@ -847,10 +854,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
           }
         }
       }
-      narrow_pass = true;
-      const bool moved = refine_edge_grids();
-      narrow_pass = false;
-      if (!moved) break;
+      if (!refine_edge_grids(true)) break;
       find_edge_grids();
     }
   }
@@ -1259,6 +1263,11 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       // of 2310.) With no such block, the pixels chosen first.
       MomentSums first;
       RaySums first_rays;
+      auto add_to_first = [&](const Eigen::Vector3f& pf) {
+        first.AddPosition(pf.x(), pf.y(), pf.z());
+        const float z = internal::PointDepth(pf, spherical);
+        if (z > 0.0f) first_rays.Add(pf, z, params_.RayFitWeight(z));
+      };
       constexpr int kBlock = 2;
       std::vector<float>& block_ratio = ws.block_ratio;
       block_ratio.resize(num_candidates);
@@ -1269,43 +1278,35 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         for (int by = gy0; by < gy1; by += kBlock) {
           for (int bx = gx0; bx < gx1; bx += kBlock) {
             const int bx1 = std::min(gx1, bx + kBlock), by1 = std::min(gy1, by + kBlock);
-            std::fill(block_ratio.begin(), block_ratio.end(), 0.0f);
-            int count = 0;
-            for (int y = by; y < by1; ++y) {
-              for (int x = bx; x < bx1; ++x) {
-                const Eigen::Vector3f& pf = pts[static_cast<std::size_t>(y) * width + x];
-                if (!std::isfinite(pf.z())) continue;
-                ++count;
-                const float rel = relative_noise(internal::PointDepth(pf, spherical));
-                for (int j = 0; j < num_candidates; ++j) {
-                  float dist, tol;
-                  distance_and_tolerance(pf, rel, planes.data() + 4 * j, dist, tol);
-                  block_ratio[j] += dist * dist / std::max(tol * tol, 1e-18f);
+            auto for_each_block_point = [&](const auto& visit) {
+              for (int y = by; y < by1; ++y) {
+                for (int x = bx; x < bx1; ++x) {
+                  const Eigen::Vector3f& pf = pts[static_cast<std::size_t>(y) * width + x];
+                  if (std::isfinite(pf.z())) visit(pf);
                 }
               }
-            }
+            };
+            std::fill(block_ratio.begin(), block_ratio.end(), 0.0f);
+            int count = 0;
+            for_each_block_point([&](const Eigen::Vector3f& pf) {
+              ++count;
+              const float rel = relative_noise(internal::PointDepth(pf, spherical));
+              for (int j = 0; j < num_candidates; ++j) {
+                float dist, tol;
+                distance_and_tolerance(pf, rel, planes.data() + 4 * j, dist, tol);
+                block_ratio[j] += dist * dist / std::max(tol * tol, 1e-18f);
+              }
+            });
             if (count == 0 || !(block_ratio[0] < count)) continue;
             const auto best = std::min_element(block_ratio.begin(), block_ratio.end());
             if (best != block_ratio.begin()) continue;  // another candidate fits it better
-            for (int y = by; y < by1; ++y) {
-              for (int x = bx; x < bx1; ++x) {
-                const Eigen::Vector3f& pf = pts[static_cast<std::size_t>(y) * width + x];
-                if (!std::isfinite(pf.z())) continue;
-                first.AddPosition(pf.x(), pf.y(), pf.z());
-                const float z = internal::PointDepth(pf, spherical);
-                if (z > 0.0f) first_rays.Add(pf, z, params_.RayFitWeight(z));
-              }
-            }
+            for_each_block_point(add_to_first);
           }
         }
       }
       if (first.k < 3) {
         for (const auto& [i, c, to] : choices) {
-          if (to != 0) continue;
-          const Eigen::Vector3f& pf = pts[i];
-          first.AddPosition(pf.x(), pf.y(), pf.z());
-          const float z = internal::PointDepth(pf, spherical);
-          if (z > 0.0f) first_rays.Add(pf, z, params_.RayFitWeight(z));
+          if (to == 0) add_to_first(pts[i]);
         }
       }
       auto& ray_planes = ws.candidate_ray_planes;
@@ -1441,7 +1442,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         const double interior = ws.fit_sums[r].k, all = ws.regions[r].k;
         const bool refined_first =
             interior < grid_.refine_interior_fraction * all && all >= grid_.narrow_refine_points;
-        ws.narrow[r] = refined_first ? 2 : interior < 0.25 * all ? 1 : 0;
+        ws.narrow[r] = refined_first ? 2 : too_narrow_for_interior_fit(interior, all) ? 1 : 0;
         any_narrow |= ws.narrow[r] != 0;
       }
       if (any_narrow) {
