@@ -11,7 +11,7 @@ RUN_ARGS ?=
 # Debian 12 packages the build needs (PCL without recommends: about a minute instead of many).
 DEB_PACKAGES := build-essential cmake ccache pkg-config libeigen3-dev libceres-dev liboctomap-dev \
   libpcl-dev libyaml-cpp-dev libgtest-dev libgmock-dev libcli11-dev libpng-dev zlib1g-dev \
-  nlohmann-json3-dev clang libclang-rt-14-dev
+  nlohmann-json3-dev clang libclang-rt-14-dev python3
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 SAN_BUILD_DIR ?= build-asan
