@@ -10,10 +10,8 @@ namespace {
 void VisitDetection(FieldVisitor& v, DetectionSection& c) {
   auto& p = c.params;
   v.Field("method", c.method,
-          "detector: grid (GBRG, grid.cell_size), grid3/4/5, grid-fast (6x6 grids, grid-level "
-          "refinement only), grid3-fast (the same with 3x3 grids), grid-paper (refit per join, "
-          "no refinement/merge/ray fit), "
-          "point (PBRG), point-exact (refit per point), point-paper (no merge/ray fit)",
+          "detector: grid (GBRG), grid-fast (GBRG's grid-level pipeline, fastest), grid-paper "
+          "(the paper's GBRG), point (PBRG), point-paper (the paper's PBRG)",
           DetectorMethods());
   v.Field("threshold_model", c.threshold_model,
           "constant: the paper's fixed thresholds; depth: thresholds grow with the sensor noise "
@@ -75,7 +73,10 @@ PLANESLAM_REGISTER_CONFIG_SECTION(DetectionSection, "detection",
                                   &VisitDetection, &ValidateDetection);
 
 void VisitGrid(FieldVisitor& v, detection::GridParams& c) {
-  v.Field("cell_size", c.cell_size, "grid side k [px] (paper: 3)", 2, 32);
+  v.Field("cell_size", c.cell_size,
+          "grid side k [px]; 0 = the method's own (grid, grid-paper: 3 as in the paper; "
+          "grid-fast: 6)",
+          0, 32);
   v.Field("mu", c.mu, "min valid points of a non-sparse grid; 0 = k^2 - k + 1 (paper: 7 for 3x3)",
           0, 1024);
   v.Field("alpha", c.alpha, "linear grid when l2 <= alpha l3 (paper: 0.006)", 1e-9, 0.999999);
@@ -84,36 +85,6 @@ void VisitGrid(FieldVisitor& v, detection::GridParams& c) {
           "1 = refit the plane on every join (paper); N = every N joins; 0 = adaptive (every "
           "N/64 joins of an N-grid region, exact MSE test)",
           0, 1000000);
-  v.Field("refine_grids", c.refine_grids,
-          "each grid at a plane's border, in a plane or outside every plane, goes whole to the "
-          "adjacent plane that fits it best within tolerance; without detection.refine_boundary "
-          "planes are then fitted to their interior grids");
-  v.Field("unresolved_spread", c.unresolved_spread,
-          "depth model: a growing region whose second-smallest spread is under this many times "
-          "its ray noise has no resolved normal yet and joins grids by the MSE test alone "
-          "(0 = off)",
-          0.0, 100.0);
-  v.Field("narrow_refine_points", c.narrow_refine_points,
-          "without detection.refine_boundary: the smallest plane (points of its whole grids) too "
-          "narrow for a fit to its interior grids that is refined pixel by pixel on its grids and "
-          "those around them",
-          0.0, 1e9);
-  v.Field("refine_interior_fraction", c.refine_interior_fraction,
-          "without detection.refine_boundary: a plane of narrow_refine_points or more whose "
-          "interior grids hold under this fraction of its points is refined pixel by pixel too "
-          "(0 = only planes too narrow for any whole-grid fit)",
-          0.0, 1.0);
-  v.Field("border_grid_mu", c.border_grid_mu,
-          "a grid cut by the image's right or bottom border is sparse below mu scaled by its "
-          "share of a k x k grid (else below mu)");
-  v.Field("regrow_left_out", c.regrow_left_out,
-          "after growth, the grids of regions too small to be planes that fit no plane next to "
-          "them seed and grow a second time, among themselves");
-  v.Field("narrow_passes", c.narrow_passes,
-          "with grid.refine_grids: up to this many more passes of the grid-level refinement over "
-          "the grids at a narrow plane (its edge grids hold over 3/4 of its points), while grids "
-          "move",
-          0, 64);
 }
 
 std::vector<std::string> ValidateGrid(const detection::GridParams& c) { return c.Validate(); }

@@ -8,8 +8,7 @@
 namespace planeslam::app {
 
 std::vector<std::string> DetectorMethods() {
-  return {"grid",      "grid3",      "grid4", "grid5",       "grid-fast",
-          "grid3-fast", "grid-paper", "point", "point-exact", "point-paper"};
+  return {"grid", "grid-fast", "grid-paper", "point", "point-paper"};
 }
 
 detection::DetectionParams DetectionParamsFrom(const Config& config) {
@@ -42,15 +41,9 @@ std::unique_ptr<detection::PlaneDetector> MakeDetector(const std::string& method
   detection::GridParams grid = config.Get<detection::GridParams>("grid");
   detection::PointParams point = config.Get<detection::PointParams>("point");
   std::string name = method;
-  if (method == "grid" || method == "grid-paper" || method == "grid-fast" ||
-      method == "grid3-fast" || method == "grid3" || method == "grid4" || method == "grid5") {
-    if (method.size() == 5 && method.back() >= '3' && method.back() <= '5') {
-      grid.cell_size = method.back() - '0';
-      grid.mu = 0;  // the automatic k^2 - k + 1 for the forced size
-    }
-    if (method == "grid") name = "grid" + std::to_string(grid.cell_size);
+  if (method == "grid" || method == "grid-paper" || method == "grid-fast") {
     if (method == "grid-fast") detection::UseFastVariant(params, grid);
-    if (method == "grid3-fast") detection::UseFast3x3Variant(params, grid);
+    if (method == "grid") name = "grid" + std::to_string(grid.CellSize());
     if (method == "grid-paper") {
       grid.refit_interval = 1;
       params.refine_boundary = false;
@@ -63,9 +56,9 @@ std::unique_ptr<detection::PlaneDetector> MakeDetector(const std::string& method
     ThrowIfInvalid(method, problems);
     return std::make_unique<detection::GridRegionGrowing>(params, grid, name);
   }
-  if (method == "point" || method == "point-exact" || method == "point-paper") {
-    if (method != "point") point.refit_interval = 1;
+  if (method == "point" || method == "point-paper") {
     if (method == "point-paper") {
+      point.refit_interval = 1;
       params.merge_regions = false;
       params.ray_fit = false;
     }

@@ -20,11 +20,11 @@ struct DetectionSection {
   detection::DetectionParams params;      ///< params.model is set from threshold_model
 };
 
-/// Method names MakeDetector accepts, e.g. for --help and the benchmark:
-/// grid (config's grid.cell_size), grid3, grid4, grid5, grid-fast (6x6 grids, grid-level
-/// pipeline), grid3-fast (the same with 3x3 grids), grid-paper (the paper's GBRG alone: no
-/// refinement, no merging), point (adaptive refit), point-exact (refit on every point, the paper's
-/// incremental PBRG), point-paper (point-exact without merging).
+/// Method names MakeDetector accepts, e.g. for --help and the benchmark: grid (GBRG with
+/// grid.cell_size grids, 3 by default), grid-fast (GBRG's grid-level pipeline, 6x6 grids by
+/// default), grid-paper (the paper's GBRG alone: refit on every join, no refinement, merging or
+/// ray fit), point (PBRG, adaptive refit), point-paper (the paper's PBRG: refit on every point,
+/// no merging or ray fit).
 std::vector<std::string> DetectorMethods();
 
 /// The shared thresholds of `config` (section "detection") with the model resolved.

@@ -111,6 +111,19 @@ struct Workspace {
   std::vector<std::int32_t> candidate_stamp;    ///< per region (+1): last edge grid it was seen at
 };
 
+// The grid-level pipeline's constants (GridParams::grid_level).
+// A growing region whose second-smallest spread l2 / K is within this many times its ray noise
+// has no resolved normal yet: on a far wall, where the noise exceeds a grid's width, a strip of
+// grids fits a plane across the strip, so such a region joins grids by the MSE test alone.
+constexpr double kUnresolvedSpread = 2.0;
+// More passes of the grid-level refinement at narrow planes, while grids move: one pass judges a
+// plane's neighbour grids against its fit as grown, which a few grids of the wall behind it can
+// tilt; each pass refits and judges again.
+constexpr int kNarrowPasses = 3;
+// The smallest narrow plane [points] refined pixel by pixel; smaller ones are mostly slivers of a
+// neighbouring plane, which keep whole grids.
+constexpr double kNarrowRefinePoints = 2000.0;
+
 Workspace& ThreadWorkspace() {
   thread_local Workspace ws;
   return ws;
@@ -120,44 +133,20 @@ Workspace& ThreadWorkspace() {
 
 std::vector<std::string> GridParams::Validate() const {
   std::vector<std::string> problems;
-  if (cell_size < 2 || cell_size > 32) problems.push_back("cell_size must be in [2, 32]");
-  if (mu < 0 || mu > cell_size * cell_size)
+  if (cell_size != 0 && (cell_size < 2 || cell_size > 32))
+    problems.push_back("cell_size must be 0 (automatic) or in [2, 32]");
+  if (mu < 0 || mu > CellSize() * CellSize())
     problems.push_back("mu must be in [0, cell_size^2] (0 = automatic)");
   if (EffectiveMu() < 3) problems.push_back("mu must be >= 3 (a plane needs 3 points)");
   if (!(alpha > 0 && alpha < 1)) problems.push_back("alpha must be in (0, 1)");
   if (!(beta > 0 && beta < 1)) problems.push_back("beta must be in (0, 1)");
   if (refit_interval < 0) problems.push_back("refit_interval must be >= 0 (0 = adaptive)");
-  if (!(unresolved_spread >= 0 && unresolved_spread <= 100))
-    problems.push_back("unresolved_spread must be in [0, 100] (0 = off)");
-  if (!(narrow_refine_points >= 0)) problems.push_back("narrow_refine_points must be >= 0");
-  if (!(refine_interior_fraction >= 0 && refine_interior_fraction <= 1))
-    problems.push_back("refine_interior_fraction must be in [0, 1]");
-  if (narrow_passes < 0 || narrow_passes > 64)
-    problems.push_back("narrow_passes must be in [0, 64]");
   return problems;
 }
 
-void UseGridLevelPipeline(DetectionParams& params, GridParams& grid) {
-  grid.refine_grids = true;
-  grid.unresolved_spread = 2.0;
-  params.refine_boundary = false;
-}
-
 void UseFastVariant(DetectionParams& params, GridParams& grid) {
-  grid.cell_size = 6;
-  grid.mu = 0;  // the automatic k^2 - k + 1
-  UseGridLevelPipeline(params, grid);
-  grid.border_grid_mu = true;
-  grid.regrow_left_out = true;
-  grid.narrow_passes = 3;
-}
-
-void UseFast3x3Variant(DetectionParams& params, GridParams& grid) {
-  grid.cell_size = 3;
-  grid.mu = 0;
-  UseGridLevelPipeline(params, grid);
-  grid.narrow_refine_points = 1000.0;
-  grid.refine_interior_fraction = 0.5;
+  grid.grid_level = true;
+  params.refine_boundary = false;
 }
 
 GridRegionGrowing::GridRegionGrowing(const DetectionParams& params, const GridParams& grid,
@@ -167,7 +156,7 @@ GridRegionGrowing::GridRegionGrowing(const DetectionParams& params, const GridPa
   auto more = grid_.Validate();
   problems.insert(problems.end(), more.begin(), more.end());
   PLANESLAM_CHECK(problems.empty(), "invalid GBRG parameters: " << problems.front());
-  if (name_.empty()) name_ = "grid" + std::to_string(grid_.cell_size);
+  if (name_.empty()) name_ = "grid" + std::to_string(grid_.CellSize());
 }
 
 Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) const {
@@ -175,7 +164,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   const int width = cloud.width, height = cloud.height;
   PLANESLAM_CHECK(cloud.points.size() == static_cast<std::size_t>(width) * height,
                   "organized cloud size mismatch");
-  const int k = grid_.cell_size;
+  const int k = grid_.CellSize();
   const int cells_x = (width + k - 1) / k, cells_y = (height + k - 1) / k;
   const int num_cells = cells_x * cells_y;
   // A grid's column and row without an integer division (tens of cycles, in the per-grid loops of
@@ -218,7 +207,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // The least points of a non-sparse grid at grid column cx, row cy: mu, or with border_grid_mu,
   // mu scaled by the share of a k x k grid that a grid cut by the image border covers.
   auto mu_of = [&](int cx, int cy) {
-    if (!grid_.border_grid_mu) return mu;
+    if (!grid_.grid_level) return mu;
     const int w = std::min(k, width - cx * k), h = std::min(k, height - cy * k);
     return std::max(3.0, std::ceil(mu * w * h / (k * k)));
   };
@@ -227,7 +216,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   ws.classes.assign(num_cells, CellClass::kSparse);
   ws.info.resize(num_cells);
   ws.seeds.clear();
-  if (grid_.regrow_left_out) ws.seed_keys.resize(num_cells);
+  if (grid_.grid_level) ws.seed_keys.resize(num_cells);
   // Seed key: the MSE as a float's bit pattern (monotonic for non-negative floats) above the grid
   // index, so one sort of 64-bit keys gives the order a min-heap of (MSE, index) would pop.
   auto seed_key = [](double mse, int c) {
@@ -360,12 +349,12 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
           // (far away, where a fluke can give a tiny MSE with a random normal) seed last.
           const double seed_tilt = std::min(1.0, tilt);
           ws.seeds.push_back(seed_key(mse + iso * seed_tilt * seed_tilt, c));
-          if (grid_.regrow_left_out) ws.seed_keys[c] = ws.seeds.back();
+          if (grid_.grid_level) ws.seed_keys[c] = ws.seeds.back();
         } else {
           ci.n = (e.v1.dot(centre) < 0 ? Eigen::Vector3d(-e.v1) : e.v1).cast<float>();
           ci.cos_tol = static_cast<float>(cos_eta);
           ws.seeds.push_back(seed_key(mse, c));  // Algorithm 2 line 4: minimal MSE first
-          if (grid_.regrow_left_out) ws.seed_keys[c] = ws.seeds.back();
+          if (grid_.grid_level) ws.seed_keys[c] = ws.seeds.back();
         }
       }
     }
@@ -454,7 +443,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     // (a strip of grids on a far wall fits the plane across the strip, not the wall).
     bool normal_resolved = true;
     auto update_tilt = [&](double raw_tilt) {
-      normal_resolved = !(fit.l2 < grid_.unresolved_spread * region.IsotropicMse() * region.k);
+      normal_resolved = !(fit.l2 < (grid_.grid_level ? kUnresolvedSpread : 0.0) * region.IsotropicMse() * region.k);
       tilt = std::min(1.0, raw_tilt);
       if (tilt > 0.02) {  // below, the tests ignore the tilt (see there)
         SinCosFirstQuadrant(tilt, sin_tilt, cos_tilt);  // 0.02 < tilt <= 1
@@ -578,7 +567,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       // cluttered scans). Boundary refinement may still give their pixels to a plane, and with
       // regrow_left_out they grow once more after all seeds (below).
       for (int c : ws.members) ws.cell_region[c] = -1;
-      if (grid_.regrow_left_out && !second_growth) {
+      if (grid_.grid_level && !second_growth) {
         ws.left_out.insert(ws.left_out.end(), ws.members.begin(), ws.members.end());
       }
     }
@@ -630,7 +619,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   // is taken now, so they grow among themselves only. The rest stay out (the grid-level
   // refinement may give them to the plane they fit). The planes are fitted as needed, into the
   // refinement's ws.fits (which refits every plane).
-  if (grid_.regrow_left_out && !ws.left_out.empty()) {
+  if (grid_.grid_level && !ws.left_out.empty()) {
     second_growth = true;
     ws.fits.resize(ws.regions.size());
     ws.region_fitted.assign(ws.regions.size(), 0);
@@ -825,10 +814,10 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     }
     return !ws.grid_moves.empty();
   };
-  if (grid_.refine_grids && num_regions > 0 && refine_edge_grids(false)) {
+  if (grid_.grid_level && num_regions > 0 && refine_edge_grids(false)) {
     find_edge_grids();
     // narrow_passes: the refinement again, around the narrow planes only, while grids move.
-    for (int pass = 0; pass < grid_.narrow_passes; ++pass) {
+    for (int pass = 0; pass < (grid_.grid_level ? kNarrowPasses : 0); ++pass) {
       ws.edge_points.assign(num_regions, 0.0);
       for (const int c : ws.edge_grids) {
         const int r = ws.cell_region[c];
@@ -1407,7 +1396,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
     // grid.narrow_refine_points; with grid.refine_interior_fraction, so is a plane of that many
     // points with less of them interior). Without the grid-level refinement each plane is fitted
     // to all its grids (no copy).
-    if (grid_.refine_grids) {
+    if (grid_.grid_level) {
       ws.fit_sums = ws.regions;
       ws.fit_rays = ws.rays;
       // Every grid of a plane that is not interior. Their sums and ray sums (200 bytes a grid,
@@ -1440,9 +1429,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
         // 1: too narrow for its interior grids; 2: refined pixel by pixel whatever its grids
         // apart from the other planes hold (refine_interior_fraction).
         const double interior = ws.fit_sums[r].k, all = ws.regions[r].k;
-        const bool refined_first =
-            interior < grid_.refine_interior_fraction * all && all >= grid_.narrow_refine_points;
-        ws.narrow[r] = refined_first ? 2 : too_narrow_for_interior_fit(interior, all) ? 1 : 0;
+        ws.narrow[r] = too_narrow_for_interior_fit(interior, all) ? 1 : 0;
         any_narrow |= ws.narrow[r] != 0;
       }
       if (any_narrow) {
@@ -1476,7 +1463,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
             if (params_.ray_fit) ws.fit_rays[r] = ws.apart_rays[r];
           } else {
             ws.too_narrow[r] = 1;
-            ws.refine_pixels[r] = ws.regions[r].k >= grid_.narrow_refine_points;
+            ws.refine_pixels[r] = ws.regions[r].k >= kNarrowRefinePoints;
             any_refined |= ws.refine_pixels[r] != 0;
           }
         }
@@ -1501,7 +1488,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
       }
     }
   }
-  const bool interior_fit = grid_labels && grid_.refine_grids;
+  const bool interior_fit = grid_labels && grid_.grid_level;
   internal::FinalizeSegmentation(
       cloud, region_image, ws.regions, ws.rays, borders.pixels, params_, out,
       grid_labels ? (interior_fit ? &ws.fit_sums : &ws.regions) : nullptr,

@@ -25,13 +25,13 @@ TEST(DetectorFactory, ThetaCountsFullResolutionPixelsOnDecimatedClouds) {
   }
   Config config;
   config.Set("detection.theta=400");
-  for (const std::string method : {"grid3", "point"}) {
+  for (const std::string method : {"grid", "point"}) {
     EXPECT_TRUE(MakeDetector(method, config)->Detect(cloud).planes.empty()) << method;
     const detection::Segmentation seg = MakeDetector(method, config, 2)->Detect(cloud);
     ASSERT_EQ(seg.planes.size(), 1u) << method;
     EXPECT_GT(seg.planes[0].normal.z(), 0.999) << method;
   }
-  EXPECT_THROW(MakeDetector("grid3", config, 0), CheckError);
+  EXPECT_THROW(MakeDetector("grid", config, 0), CheckError);
 }
 
 TEST(DetectorFactory, EveryMethodOnDegenerateClouds) {

@@ -57,7 +57,7 @@ TEST(GridRegionGrowing, NoiseFreeRoomDepthThresholds) {
 }
 
 TEST(GridRegionGrowing, FastVariantsNoiseFreeAndKinectNoiseWhereverTheGridsFall) {
-  // grid-fast and grid3-fast (the same pipeline with 3x3 grids) noise-free under both threshold
+  // grid-fast noise-free under both threshold
   // models and with Kinect noise (1-4 m), on the room rendered 630 to 652 pixels wide: the image
   // centre, and so where grid-fast's grids cut the corners, moves by a pixel from one width to the
   // next. (With 5x5 grids, fitted to all its grids, the grazing right wall came out 5-16 mm off on
@@ -68,17 +68,12 @@ TEST(GridRegionGrowing, FastVariantsNoiseFreeAndKinectNoiseWhereverTheGridsFall)
   // grids enough.)
   for (int width = 630; width <= 652; width += 2) {
     for (const bool depth : {true, false}) {
-      for (const bool three : {false, true}) {
+      {
         DetectionParams params = depth ? DetectionParams() : PaperConstants();
         GridParams grid;
-        if (three) {
-          UseFast3x3Variant(params, grid);
-        } else {
-          UseFastVariant(params, grid);
-        }
+        UseFastVariant(params, grid);
         const GridRegionGrowing fast(params, grid);
-        const std::string what =
-            std::string(three ? "grid3-fast" : "grid-fast") + " width " + std::to_string(width);
+        const std::string what = "grid-fast width " + std::to_string(width);
         const auto clean = test::RenderScene(test::RoomPlanes(), 0.0, 1, width, 480);
         test::ExpectPlanesFound(clean, fast.Detect(clean.cloud), 2000, 0.5, 0.005,
                                 what + (depth ? " noise-free depth" : " noise-free constant"));
@@ -97,8 +92,8 @@ TEST(GridRegionGrowing, FastVariantsNoiseFreeAndKinectNoiseWhereverTheGridsFall)
 TEST(GridRegionGrowing, GridLevelRefinementTakesBackTheWallsGridsAtTheCorner) {
   // Noise-free room, 5x5 grids, depth model, no pixel-level refinement or ray fit: far away a
   // grid's normal is noise and gets no angle test, so the grazing right wall grows into the back
-  // wall's grids along their corner (8 % of its points, 2.5 cm of offset). The grid-level
-  // refinement gives them back (and then fits the wall to its interior grids).
+  // wall's grids along their corner. The grid-level pipeline gives them back (and then fits the
+  // wall to its interior grids).
   const auto frame = test::RenderScene(test::RoomPlanes());
   DetectionParams params;
   params.refine_boundary = false;
@@ -108,7 +103,7 @@ TEST(GridRegionGrowing, GridLevelRefinementTakesBackTheWallsGridsAtTheCorner) {
   const Plane* right[2] = {nullptr, nullptr};
   Segmentation seg[2];
   for (int refine = 0; refine < 2; ++refine) {
-    grid.refine_grids = refine == 1;
+    grid.grid_level = refine == 1;
     seg[refine] = GridRegionGrowing(params, grid).Detect(frame.cloud);
     for (const auto& p : seg[refine].planes) {
       const bool right_wall = p.normal.dot(frame.planes[3].normal) > std::cos(5 * M_PI / 180);
@@ -124,29 +119,23 @@ TEST(GridRegionGrowing, GridLevelRefinementTakesBackTheWallsGridsAtTheCorner) {
 TEST(GridRegionGrowing, UnresolvedNormalsGrowByTheMseTestAlone) {
   // The noisy room 648 px wide with grid-fast's 6x6 grids: on the back wall 3.8 m away the depth
   // noise (2 cm) exceeds a grid's width (4.3 cm) in spread, so a strip of grids fits the plane
-  // across the strip. Held to that normal's angle and coplanarity tests, regions grew strips too
-  // short to be planes, and the wall (171k pixels) kept under a third of them in one plane; grown
-  // by the MSE test alone until their normal is resolved, one region takes nearly all.
+  // across the strip. Held to that normal's angle and coplanarity tests, regions would grow
+  // strips too short to be planes; grown by the MSE test alone until their normal is resolved,
+  // one region takes nearly all of the wall.
   const auto frame = test::RenderScene(test::RoomPlanes(), 1.425e-3, 648, 648, 480);
   DetectionParams params;
   GridParams grid;
   UseFastVariant(params, grid);
   int wall_pixels = 0;
   for (const int g : frame.gt_labels) wall_pixels += g == 1;
-  double share[2] = {0, 0};
-  for (const double spread : {0.0, 2.0}) {
-    grid.unresolved_spread = spread;
-    const Segmentation seg = GridRegionGrowing(params, grid).Detect(frame.cloud);
-    std::map<int, int> overlap;
-    for (std::size_t i = 0; i < seg.labels.size(); ++i) {
-      if (frame.gt_labels[i] == 1 && seg.labels[i] >= 1) ++overlap[seg.labels[i]];
-    }
-    int best = 0;
-    for (const auto& [id, count] : overlap) best = std::max(best, count);
-    share[spread > 0] = static_cast<double>(best) / wall_pixels;
+  const Segmentation seg = GridRegionGrowing(params, grid).Detect(frame.cloud);
+  std::map<int, int> overlap;
+  for (std::size_t i = 0; i < seg.labels.size(); ++i) {
+    if (frame.gt_labels[i] == 1 && seg.labels[i] >= 1) ++overlap[seg.labels[i]];
   }
-  EXPECT_LT(share[0], 0.5);
-  EXPECT_GT(share[1], 0.95);
+  int best = 0;
+  for (const auto& [id, count] : overlap) best = std::max(best, count);
+  EXPECT_GT(static_cast<double>(best) / wall_pixels, 0.95);
 }
 
 TEST(GridRegionGrowing, KinectNoiseRoomDepthThresholds) {
@@ -198,11 +187,10 @@ TEST(GridRegionGrowing, DeterministicAndIndependentOfVisitOrder) {
   // 639 x 480 is a whole number of 3x3 grids (642 x 480 of grid-fast's 6x6 grids), so turning the
   // image by 180 degrees (reversing the pixel order, same 3D points) keeps the same grids but
   // reverses every visiting order and the index tie-breaks. The planes found must be the same.
-  for (const std::string what : {"grid3", "grid-fast", "grid3-fast"}) {
+  for (const std::string what : {"grid3", "grid-fast"}) {
     DetectionParams params;
     GridParams grid;
     if (what == "grid-fast") UseFastVariant(params, grid);
-    if (what == "grid3-fast") UseFast3x3Variant(params, grid);
     const auto frame =
         test::RenderScene(test::RoomPlanes(), 1.425e-3, 3, what == "grid-fast" ? 642 : 639, 480);
     const GridRegionGrowing gbrg{params, grid};

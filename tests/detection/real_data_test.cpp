@@ -93,12 +93,8 @@ TEST(RealData, TumStructureNotextureFarFirstFrame) {
   const Segmentation fast = GridRegionGrowing(fast_params, fast_grid).Detect(cloud);
   CheckTumScene(fast, cloud, "grid-fast");
   // The grid-level refinement also gives a plane the grids along its rim that growth left out
-  // when they fit it: 83.6 % of the valid pixels assigned before it did, 92.7 % after.
+  // when they fit it, so most valid pixels are assigned.
   EXPECT_GT(AssignedFraction(fast, cloud), 0.9);
-  DetectionParams fast3_params;
-  GridParams fast3_grid;
-  UseFast3x3Variant(fast3_params, fast3_grid);
-  CheckTumScene(GridRegionGrowing(fast3_params, fast3_grid).Detect(cloud), cloud, "grid3-fast");
 }
 
 /// Laser scan of a house (3DTK convention: y up, left-handed), centimetres -> metres. The
@@ -148,10 +144,6 @@ TEST(RealData, LaserScanHouse) {
   GridParams fast_grid;
   UseFastVariant(fast_params, fast_grid);
   CheckLaserScene(GridRegionGrowing(fast_params, fast_grid).Detect(cloud), "grid-fast");
-  DetectionParams fast3_params = params;
-  GridParams fast3_grid;
-  UseFast3x3Variant(fast3_params, fast3_grid);
-  CheckLaserScene(GridRegionGrowing(fast3_params, fast3_grid).Detect(cloud), "grid3-fast");
 }
 
 }  // namespace
