@@ -31,6 +31,300 @@ Workspace& ThreadWorkspace() {
   return ws;
 }
 
+/// A seed: the point, its window neighbours within delta, and their moments and plane.
+struct Seed {
+  std::size_t s = 0;
+  int nb[8] = {};
+  int n_nb = 0;
+  MomentSums region;
+  FastFit fit;
+};
+
+/// A region while it grows: its index, moments, current plane and joins since the last refit.
+struct Growth {
+  int r = 0;
+  MomentSums region;
+  FastFit fit;
+  double since_refit = 0;
+};
+
+/// Outcome of the join test of one point.
+struct JoinTest {
+  bool accept = false;
+  bool refitted = false;  ///< new_fit holds the plane of the region with the point
+  FastFit new_fit;
+};
+
+/// One PBRG pass over a cloud: the per-pixel state in the workspace and the steps of
+/// Algorithm 1 (seed, grow, accept or set aside).
+class PbrgPass {
+ public:
+  PbrgPass(const datasets::OrganizedCloud& cloud, const DetectionParams& params,
+           const PointParams& point, Workspace* ws)
+      : params_(params),
+        point_(point),
+        ws_(*ws),
+        pts_(cloud.points.data()),
+        n_(cloud.points.size()),
+        width_(cloud.width),
+        height_(cloud.height),
+        spherical_(cloud.model == datasets::SensorModel::kSpherical),
+        depth_model_(params.model == ThresholdModel::kDepth) {}
+
+  /// Resets the workspace and computes each point's relative noise (sigma(z)/z)^2, -1 when invalid.
+  void Prepare() {
+    ws_.labels.assign(n_, -1);
+    ws_.visited.assign(n_, 0);
+    ws_.rel2.resize(n_);
+    for (std::size_t i = 0; i < n_; ++i) {
+      const Eigen::Vector3f& p = pts_[i];
+      if (!std::isfinite(p.z())) {
+        ws_.rel2[i] = -1.0f;  // invalid
+        continue;
+      }
+      const double z = internal::PointDepth(p, spherical_);
+      const double rel = params_.Sigma(z) / z;
+      ws_.rel2[i] = static_cast<float>(rel * rel);
+    }
+    ws_.regions.clear();
+    ws_.fits.clear();
+  }
+
+  /// Visits the points in scan order; each unvisited one that makes a seed grows a region.
+  void GrowAll() {
+    for (std::size_t s = 0; s < n_; ++s) {
+      if (ws_.rel2[s] < 0 || ws_.visited[s]) continue;
+      Seed seed;
+      seed.s = s;
+      seed.n_nb = WindowNeighbours(s, seed.nb);
+      if (seed.n_nb < point_.seed_neighbours) continue;
+      if (!PlanarSeed(&seed)) continue;
+      Growth g = StartRegion(seed);
+      Grow(&g);
+      CloseRegion(g.region);
+    }
+  }
+
+ private:
+  /// Seed test (a): the neighbours in the 3x3 window within delta of point s that are valid and
+  /// in no region; returns their count, indices in `nb`.
+  int WindowNeighbours(std::size_t s, int nb[8]) const {
+    const int sx = static_cast<int>(s % width_), sy = static_cast<int>(s / width_);
+    const Eigen::Vector3f& ps = pts_[s];
+    const double zs = internal::PointDepth(ps, spherical_);
+    const float delta_s = static_cast<float>(params_.Delta(zs));
+    int n_nb = 0;
+    for (int oy = -1; oy <= 1; ++oy) {
+      const int y = sy + oy;
+      if (y < 0 || y >= height_) continue;
+      for (int ox = -1; ox <= 1; ++ox) {
+        const int x = sx + ox;
+        if ((ox == 0 && oy == 0) || x < 0 || x >= width_) continue;
+        const int i = y * width_ + x;
+        if (ws_.rel2[i] < 0 || ws_.labels[i] >= 0 || ws_.visited[i]) continue;
+        if ((pts_[i] - ps).norm() < delta_s) nb[n_nb++] = i;
+      }
+    }
+    return n_nb;
+  }
+
+  /// Seed test (b): local planarity of the seed and its neighbours by the grid shape test
+  /// (alpha, beta), or under the depth model by an MSE within the noise; fills the seed's moments
+  /// and plane.
+  bool PlanarSeed(Seed* seed) const {
+    const Eigen::Vector3f& ps = pts_[seed->s];
+    MomentSums& region = seed->region;
+    region.Add(ps.x(), ps.y(), ps.z(), ws_.rel2[seed->s]);
+    for (int j = 0; j < seed->n_nb; ++j) {
+      const Eigen::Vector3f& q = pts_[seed->nb[j]];
+      region.Add(q.x(), q.y(), q.z(), ws_.rel2[seed->nb[j]]);
+    }
+    const FastFit& fit = seed->fit = FitSums(region);
+    if (fit.l2 <= point_.alpha * fit.l3) return false;  // linear
+    bool planar = fit.l1 <= point_.beta * fit.l2;
+    if (!planar && depth_model_) {
+      const double noise = region.EffectiveMse(fit.normal, region.NormalTilt(fit.l2));
+      planar = fit.mse <= params_.planar_sigmas * params_.planar_sigmas * noise;
+    }
+    return planar;
+  }
+
+  /// Labels the seed and its neighbours as the next region (Algorithm 1 line 6).
+  Growth StartRegion(const Seed& seed) {
+    Growth g;
+    g.r = static_cast<int>(ws_.regions.size());
+    g.region = seed.region;
+    g.fit = seed.fit;
+    ws_.members.clear();
+    ws_.members.push_back(static_cast<int>(seed.s));
+    for (int j = 0; j < seed.n_nb; ++j) ws_.members.push_back(seed.nb[j]);
+    for (int m : ws_.members) {
+      ws_.labels[m] = g.r;
+      ws_.visited[m] = 1;
+    }
+    return g;
+  }
+
+  /// The 4-neighbour of pixel q in direction dir (right, left, down, up), -1 off the image.
+  int Neighbour(int q, int dir) const {
+    const int qx = q % width_, qy = q / width_;
+    if (dir == 0) return qx + 1 >= width_ ? -1 : q + 1;
+    if (dir == 1) return qx == 0 ? -1 : q - 1;
+    if (dir == 2) return qy + 1 >= height_ ? -1 : q + width_;
+    return qy == 0 ? -1 : q - width_;
+  }
+
+  /// Breadth-first growth over 4-neighbours (Algorithm 1 lines 7-12).
+  void Grow(Growth* g) {
+    std::size_t head = 0;
+    while (head < ws_.members.size()) {
+      const int q = ws_.members[head++];
+      for (int dir = 0; dir < 4; ++dir) {
+        const int c = Neighbour(q, dir);
+        if (c >= 0) TryJoin(q, c, g);
+      }
+    }
+  }
+
+  /// Tolerance on the distance of point c (at pc) to plane f of moments m: point noise along the
+  /// normal (sigma |n.p| / z), and for a young region the normal's own uncertainty times the lever
+  /// arm from the centroid (as in GBRG).
+  double GammaFor(const FastFit& f, const MomentSums& m, int c, const Eigen::Vector3d& pc) const {
+    if (!depth_model_) return params_.gamma;
+    const double tilt = std::min(1.0, m.NormalTilt(f.l2));
+    const double sn = std::sqrt(ws_.rel2[c]) * std::abs(f.normal.dot(pc));
+    if (tilt <= 0.02) return params_.Gamma(sn);  // a sharp normal: no lever-arm term
+    const Eigen::Vector3d diff = pc - f.centroid;
+    const double off = f.normal.dot(diff);
+    const double lateral = std::sqrt(std::max(0.0, diff.squaredNorm() - off * off));
+    return params_.Gamma(sn) + tilt * lateral;
+  }
+
+  /// Whether MSE `mse` of `merged` about plane normal `normal` (scatter eigenvalue l2) is within
+  /// epsilon.
+  bool MseWithinEpsilon(double mse, const MomentSums& merged, const Eigen::Vector3d& normal,
+                        double l2) const {
+    return mse < params_.Epsilon(merged.EffectiveMse(normal, merged.NormalTilt(l2)), merged.k);
+  }
+
+  /// The join test of point c (at pc) for region `g`, `merged` being g's moments with c added
+  /// (Algorithm 1 line 9).
+  JoinTest TestJoin(int c, const Eigen::Vector3d& pc, const Growth& g,
+                    const MomentSums& merged) const {
+    JoinTest test;
+    const FastFit& fit = g.fit;
+    if (point_.refit_interval == 1) {
+      // The paper's test: distance and MSE against the plane refitted with the point.
+      test.new_fit = RefitFrom(merged, fit.normal);
+      test.refitted = true;
+      const double dist = std::abs(test.new_fit.normal.dot(pc) - test.new_fit.d);
+      test.accept =
+          dist < GammaFor(test.new_fit, merged, c, pc) &&
+          MseWithinEpsilon(test.new_fit.mse, merged, test.new_fit.normal, test.new_fit.l2);
+      return test;
+    }
+    // Approximate distance test against the current plane; MSE bound about its normal. Each
+    // bound is at least its cheap part (the base gamma; epsilon of the noise along the normal
+    // alone, which the tilt term only raises): within that, no roots needed.
+    const double dist = std::abs(fit.normal.dot(pc) - fit.d);
+    if (dist >= params_.gamma && dist >= GammaFor(fit, g.region, c, pc)) return test;
+    if (MseAboutWithinEpsilon(merged, fit.normal, params_) ||
+        MseWithinEpsilon(merged.MseAbout(fit.normal), merged, fit.normal, fit.l2)) {
+      test.accept = true;
+      return test;
+    }
+    test.new_fit = RefitFrom(merged, fit.normal);
+    test.refitted = true;
+    test.accept = MseWithinEpsilon(test.new_fit.mse, merged, test.new_fit.normal, test.new_fit.l2);
+    return test;
+  }
+
+  /// A joint point c already in an earlier plane `owner` (the paper's shared points) stays with
+  /// the plane it fits best, in units of each plane's tolerance at that point. Returns true when
+  /// the growing region (plane `cur`, moments `merged`) takes it; its moments then leave `owner`.
+  bool TakeJointPoint(int c, const Eigen::Vector3d& pc, int owner, const FastFit& cur,
+                      const MomentSums& merged) {
+    const FastFit& old = ws_.fits[owner];
+    const double t_new = GammaFor(cur, merged, c, pc),
+                 t_old = GammaFor(old, ws_.regions[owner], c, pc);
+    if (std::abs(old.normal.dot(pc) - old.d) / t_old <=
+        std::abs(cur.normal.dot(pc) - cur.d) / t_new)
+      return false;
+    MomentSums one;
+    one.Add(pc.x(), pc.y(), pc.z(), ws_.rel2[c]);
+    ws_.regions[owner].Subtract(one);
+    ws_.stolen.emplace_back(c, owner);
+    return true;
+  }
+
+  /// Takes `merged` as the region's moments and updates its plane: the refitted one when the test
+  /// refitted, else a refit every refit_interval joins (adaptive: every max(1, K/64)).
+  void Advance(const MomentSums& merged, const JoinTest& test, Growth* g) const {
+    g->region = merged;
+    g->since_refit += 1.0;
+    if (test.refitted) {
+      g->fit = test.new_fit;
+      g->since_refit = 0;
+      return;
+    }
+    const int refit_interval = point_.refit_interval;
+    const double interval = refit_interval > 0 ? refit_interval : std::max(1.0, g->region.k / 64.0);
+    if (g->since_refit >= interval) {
+      g->fit = RefitFrom(g->region, g->fit.normal);
+      g->since_refit = 0;
+    }
+  }
+
+  /// Tests neighbour c of region point q for region `g` and adds it when it joins.
+  void TryJoin(int q, int c, Growth* g) {
+    const int owner = ws_.labels[c];
+    if (owner == g->r || ws_.rel2[c] < 0) return;
+    if (owner < 0 && ws_.visited[c]) return;  // in R': left PCD (Algorithm 1 line 3)
+    const Eigen::Vector3f& pq = pts_[q];
+    const Eigen::Vector3f& pcf = pts_[c];
+    const double zc = internal::PointDepth(pcf, spherical_);
+    const double delta_c = params_.Delta(zc);
+    if ((pcf - pq).squaredNorm() >= delta_c * delta_c) return;  // dis(GR, p_c) < delta
+    const Eigen::Vector3d pc = pcf.cast<double>();
+    MomentSums merged = g->region;
+    merged.Add(pc.x(), pc.y(), pc.z(), ws_.rel2[c]);
+    const JoinTest test = TestJoin(c, pc, *g, merged);
+    if (!test.accept) return;
+    if (owner >= 0 && !TakeJointPoint(c, pc, owner, test.refitted ? test.new_fit : g->fit, merged))
+      return;
+    Advance(merged, test, g);
+    ws_.labels[c] = g->r;
+    ws_.visited[c] = 1;
+    ws_.members.push_back(c);
+  }
+
+  /// Keeps a grown region of at least theta points as a plane (R); a smaller one goes to R' (its
+  /// points leave PCD: no seed, no growth) and the joint points it took go back to their plane.
+  void CloseRegion(const MomentSums& region) {
+    if (static_cast<int>(ws_.members.size()) >= params_.theta) {
+      ws_.regions.push_back(region);
+      ws_.fits.push_back(FitSums(region));
+    } else {
+      for (int m : ws_.members) ws_.labels[m] = -1;
+      for (const auto& [point, owner] : ws_.stolen) {
+        const Eigen::Vector3f& q = pts_[point];
+        ws_.regions[owner].Add(q.x(), q.y(), q.z(), ws_.rel2[point]);
+        ws_.labels[point] = owner;
+      }
+    }
+    ws_.stolen.clear();
+  }
+
+  const DetectionParams& params_;
+  const PointParams& point_;
+  Workspace& ws_;
+  const Eigen::Vector3f* pts_;
+  std::size_t n_;
+  int width_, height_;
+  bool spherical_;
+  bool depth_model_;
+};
+
 }  // namespace
 
 std::vector<std::string> PointParams::Validate() const {
@@ -59,200 +353,14 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
                   "organized cloud size mismatch");
   out.width = width;
   out.height = height;
-  const std::size_t n = cloud.points.size();
-  if (n == 0) return out;
-  const bool spherical = cloud.model == datasets::SensorModel::kSpherical;
-  const bool depth_model = params_.model == ThresholdModel::kDepth;
-  const Eigen::Vector3f* pts = cloud.points.data();
+  if (cloud.points.empty()) return out;
   Workspace& ws = ThreadWorkspace();
+  PbrgPass pass(cloud, params_, point_, &ws);
 
   const auto t0 = Clock::now();
-  ws.labels.assign(n, -1);
-  ws.visited.assign(n, 0);
-  ws.rel2.resize(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const Eigen::Vector3f& p = pts[i];
-    if (!std::isfinite(p.z())) {
-      ws.rel2[i] = -1.0f;  // invalid
-      continue;
-    }
-    const double z = internal::PointDepth(p, spherical);
-    const double rel = params_.Sigma(z) / z;
-    ws.rel2[i] = static_cast<float>(rel * rel);
-  }
-  ws.regions.clear();
-  ws.fits.clear();
-  const int refit_interval = point_.refit_interval;
-
+  pass.Prepare();
   const auto t1 = Clock::now();
-  for (std::size_t s = 0; s < n; ++s) {
-    if (ws.rel2[s] < 0 || ws.visited[s]) continue;
-    const int sx = static_cast<int>(s % width), sy = static_cast<int>(s / width);
-    const Eigen::Vector3f& ps = pts[s];
-    const double zs = internal::PointDepth(ps, spherical);
-    const float delta_s = static_cast<float>(params_.Delta(zs));
-    // (a) neighbours of the 3x3 window within delta (not in an accepted plane).
-    int nb[8];
-    int n_nb = 0;
-    for (int oy = -1; oy <= 1; ++oy) {
-      const int y = sy + oy;
-      if (y < 0 || y >= height) continue;
-      for (int ox = -1; ox <= 1; ++ox) {
-        const int x = sx + ox;
-        if ((ox == 0 && oy == 0) || x < 0 || x >= width) continue;
-        const int i = y * width + x;
-        if (ws.rel2[i] < 0 || ws.labels[i] >= 0 || ws.visited[i]) continue;
-        if ((pts[i] - ps).norm() < delta_s) nb[n_nb++] = i;
-      }
-    }
-    if (n_nb < point_.seed_neighbours) continue;
-    // (b) local planarity by the grid shape test.
-    MomentSums region;
-    region.Add(ps.x(), ps.y(), ps.z(), ws.rel2[s]);
-    for (int j = 0; j < n_nb; ++j) {
-      const Eigen::Vector3f& q = pts[nb[j]];
-      region.Add(q.x(), q.y(), q.z(), ws.rel2[nb[j]]);
-    }
-    FastFit fit = FitSums(region);
-    if (fit.l2 <= point_.alpha * fit.l3) continue;  // linear
-    bool planar = fit.l1 <= point_.beta * fit.l2;
-    if (!planar && depth_model) {
-      const double noise = region.EffectiveMse(fit.normal, region.NormalTilt(fit.l2));
-      planar = fit.mse <= params_.planar_sigmas * params_.planar_sigmas * noise;
-    }
-    if (!planar) continue;
-
-    // Grow (Algorithm 1 lines 6-12).
-    const int r = static_cast<int>(ws.regions.size());
-    ws.members.clear();
-    ws.members.push_back(static_cast<int>(s));
-    for (int j = 0; j < n_nb; ++j) ws.members.push_back(nb[j]);
-    for (int m : ws.members) {
-      ws.labels[m] = r;
-      ws.visited[m] = 1;
-    }
-    std::size_t head = 0;
-    double since_refit = 0;
-    while (head < ws.members.size()) {
-      const int q = ws.members[head++];
-      const int qx = q % width, qy = q / width;
-      const Eigen::Vector3f& pq = pts[q];
-      for (int dir = 0; dir < 4; ++dir) {
-        int c;
-        if (dir == 0) {
-          if (qx + 1 >= width) continue;
-          c = q + 1;
-        } else if (dir == 1) {
-          if (qx == 0) continue;
-          c = q - 1;
-        } else if (dir == 2) {
-          if (qy + 1 >= height) continue;
-          c = q + width;
-        } else {
-          if (qy == 0) continue;
-          c = q - width;
-        }
-        const int owner = ws.labels[c];
-        if (owner == r || ws.rel2[c] < 0) continue;
-        if (owner < 0 && ws.visited[c]) continue;  // in R': left PCD (Algorithm 1 line 3)
-        const Eigen::Vector3f& pcf = pts[c];
-        const double zc = internal::PointDepth(pcf, spherical);
-        const double delta_c = params_.Delta(zc);
-        if ((pcf - pq).squaredNorm() >= delta_c * delta_c) continue;  // dis(GR, p_c) < delta
-        const Eigen::Vector3d pc = pcf.cast<double>();
-        MomentSums merged = region;
-        merged.Add(pc.x(), pc.y(), pc.z(), ws.rel2[c]);
-        // Tolerances: point noise along the normal (sigma |n.p| / z), and for a young region the
-        // normal's own uncertainty times the lever arm from the centroid (as in GBRG).
-        auto gamma_for = [&](const FastFit& f, const MomentSums& m) {
-          if (!depth_model) return params_.gamma;
-          const double tilt = std::min(1.0, m.NormalTilt(f.l2));
-          const double sn = std::sqrt(ws.rel2[c]) * std::abs(f.normal.dot(pc));
-          if (tilt <= 0.02) return params_.Gamma(sn);  // a sharp normal: no lever-arm term
-          const Eigen::Vector3d diff = pc - f.centroid;
-          const double off = f.normal.dot(diff);
-          const double lateral = std::sqrt(std::max(0.0, diff.squaredNorm() - off * off));
-          return params_.Gamma(sn) + tilt * lateral;
-        };
-        bool accept;
-        FastFit new_fit;
-        bool refitted = false;
-        const bool exact = refit_interval == 1;
-        if (!exact) {
-          // Approximate distance test against the current plane; MSE bound about its normal.
-          // Each bound is at least its cheap part (the base gamma; epsilon of the noise along
-          // the normal alone, which the tilt term only raises): within that, no roots needed.
-          const double dist = std::abs(fit.normal.dot(pc) - fit.d);
-          if (dist >= params_.gamma && dist >= gamma_for(fit, region)) continue;
-          if (MseAboutWithinEpsilon(merged, fit.normal, params_) ||
-              merged.MseAbout(fit.normal) <
-                  params_.Epsilon(merged.EffectiveMse(fit.normal, merged.NormalTilt(fit.l2)),
-                                  merged.k)) {
-            accept = true;
-          } else {
-            new_fit = RefitFrom(merged, fit.normal);
-            refitted = true;
-            accept =
-                new_fit.mse <
-                params_.Epsilon(merged.EffectiveMse(new_fit.normal, merged.NormalTilt(new_fit.l2)),
-                                merged.k);
-          }
-        } else {
-          new_fit = RefitFrom(merged, fit.normal);
-          refitted = true;
-          const double dist = std::abs(new_fit.normal.dot(pc) - new_fit.d);
-          accept = dist < gamma_for(new_fit, merged) &&
-                   new_fit.mse < params_.Epsilon(merged.EffectiveMse(new_fit.normal,
-                                                                     merged.NormalTilt(new_fit.l2)),
-                                                 merged.k);
-        }
-        if (!accept) continue;
-        if (owner >= 0) {
-          // A joint point already in an earlier plane (the paper's shared points): it stays
-          // with the plane it fits best, in units of each plane's tolerance at that point.
-          const FastFit& cur = refitted ? new_fit : fit;
-          const FastFit& old = ws.fits[owner];
-          const double t_new = gamma_for(cur, merged), t_old = gamma_for(old, ws.regions[owner]);
-          if (std::abs(old.normal.dot(pc) - old.d) / t_old <=
-              std::abs(cur.normal.dot(pc) - cur.d) / t_new)
-            continue;
-          MomentSums one;
-          one.Add(pc.x(), pc.y(), pc.z(), ws.rel2[c]);
-          ws.regions[owner].Subtract(one);
-          ws.stolen.emplace_back(c, owner);
-        }
-        region = merged;
-        since_refit += 1.0;
-        if (refitted) {
-          fit = new_fit;
-          since_refit = 0;
-        } else {
-          const double interval =
-              refit_interval > 0 ? refit_interval : std::max(1.0, region.k / 64.0);
-          if (since_refit >= interval) {
-            fit = RefitFrom(region, fit.normal);
-            since_refit = 0;
-          }
-        }
-        ws.labels[c] = r;
-        ws.visited[c] = 1;
-        ws.members.push_back(c);
-      }
-    }
-    if (static_cast<int>(ws.members.size()) >= params_.theta) {
-      ws.regions.push_back(region);
-      ws.fits.push_back(FitSums(region));
-    } else {
-      for (int m : ws.members) ws.labels[m] = -1;     // R': out of PCD, no seed, no growth
-      for (const auto& [point, owner] : ws.stolen) {  // joint points go back to their plane
-        const Eigen::Vector3f& q = pts[point];
-        ws.regions[owner].Add(q.x(), q.y(), q.z(), ws.rel2[point]);
-        ws.labels[point] = owner;
-      }
-    }
-    ws.stolen.clear();
-  }
-
+  pass.GrowAll();
   const auto t2 = Clock::now();
   internal::FinalizeLabelImage(cloud, ws.labels, ws.regions, params_, out);
   const auto t3 = Clock::now();

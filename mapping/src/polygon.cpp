@@ -219,9 +219,9 @@ std::vector<std::string> PolygonConfig::Validate() const {
 
 namespace {
 
-/// Default Douglas-Peucker tolerance in cells. One cell cut convex corners enough to lose 4% of the
-/// area of a 5000-point notched rectangle (mean of 20 seeds); half a cell keeps the area within 1%
-/// with about 20-30 vertices on the test shapes.
+/// Default Douglas-Peucker tolerance in cells. A whole cell cuts convex corners off enough to lose
+/// a noticeable part of the area; half a cell keeps the area close to the grid's while an outline
+/// still needs only a few tens of vertices.
 constexpr double kAutoToleranceCells = 0.5;
 
 struct Bounds {

@@ -329,7 +329,7 @@ PoseGraphResult OptimizePoseGraph(PoseGraph& graph, const PoseGraphConfig& confi
   options.gradient_tolerance = config.gradient_tolerance;
   options.parameter_tolerance = config.parameter_tolerance;
   options.num_threads = config.num_threads;
-  // Core libraries print nothing (architecture rule 1).
+  // Core libraries print nothing; reporting is the apps' business.
   options.logging_type = ceres::SILENT;
   options.minimizer_progress_to_stdout = false;
 

@@ -167,12 +167,11 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
   if (!use_registration) ++stats_.untracked_frames;
   if (result.degenerate) ++stats_.degenerate_frames;
 
-  // An update along directions the planes left open would feed the prior back into itself.
-  // (Updating only along the determined directions, each its own, was tried: synthetic room ATE
-  // 5.8 -> 72 cm.) Translation and rotation as wholes are held apart: two walls leave a translation
-  // open but fix the rotation, whose rate then keeps following an accelerating turn (synthetic
-  // room, seeds 1-3: ATE 1.59 / 1.40 / 1.51 cm holding both, 1.47 / 1.25 / 1.39 cm holding each on
-  // its own).
+  // An update along directions the planes left open would feed the prior back into itself, so
+  // the velocity is held there. Translation and rotation are each held as a whole (an update of
+  // some of their directions only would mix a measured rate with a held one), but apart from each
+  // other: two walls leave a translation open but fix the rotation, whose rate then keeps
+  // following an accelerating turn.
   bool translation_open = !use_registration, rotation_open = !use_registration;
   for (const registration::Vector6d& direction : reg.degenerate_directions) {
     (direction.head<3>().squaredNorm() > 0.5 ? translation_open : rotation_open) = true;

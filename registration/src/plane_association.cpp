@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <limits>
 #include <numeric>
+#include <optional>
 #include <tuple>
 
 #include "plane_residual.hpp"
@@ -175,51 +176,60 @@ double LogDet(const Matrix6d& c) {
   return s;
 }
 
-}  // namespace
+std::vector<PlaneInfo> Infos(const std::vector<detection::Plane>& planes,
+                             const RegistrationConfig& rc) {
+  std::vector<PlaneInfo> infos;
+  for (const auto& p : planes) infos.push_back(Info(p, rc));
+  return infos;
+}
 
-AssociationResult AssociatePlanes(const std::vector<detection::Plane>& prev,
-                                  const std::vector<detection::Plane>& curr,
-                                  const MotionPrior& prior, const AssociationConfig& config,
-                                  const RegistrationConfig& rc) {
-  AssociationResult out;
+/// Appends to `mine` the orientations of current plane j (as is, and flipped when it passes close
+/// to the sensor) that pass the angle and offset gates against previous plane i under the prior.
+void GatePair(int i, int j, const PlaneInfo& a, const PlaneInfo& b, const Eigen::Matrix3d& R0,
+              const Eigen::Vector3d& t0, const AssociationConfig& config,
+              std::vector<Candidate>* mine) {
+  const double cos_gate = std::cos(config.max_normal_angle_deg * kDeg);
+  for (int flip = 0; flip < 2; ++flip) {
+    if (flip && !(b.d < config.flip_max_offset)) break;
+    Candidate c;
+    c.i = i;
+    c.j = j;
+    c.flip = flip != 0;
+    c.n_b = flip ? Eigen::Vector3d(-b.n) : b.n;
+    c.d_b = flip ? -b.d : b.d;
+    const Eigen::Vector3d n_pred = R0 * c.n_b;
+    const double cosang = std::clamp(a.n.dot(n_pred), -1.0, 1.0);
+    if (cosang < cos_gate) continue;
+    const double d_err = a.d - (c.d_b + n_pred.dot(t0));
+    if (std::abs(d_err) > config.max_offset_difference) continue;
+    const double ang = std::acos(cosang) / (config.max_normal_angle_deg * kDeg);
+    const double off = d_err / config.max_offset_difference;
+    c.score = ang * ang + off * off;
+    mine->push_back(c);
+  }
+}
+
+/// True when the in-plane extents of two planes differ by more than the configured ratio.
+bool ExtentsDisagree(const PlaneInfo& a, const PlaneInfo& b, const AssociationConfig& config) {
+  if (!(config.max_extent_ratio > 0 && a.extent > 0 && b.extent > 0)) return false;
+  const double ratio = std::max(a.extent, b.extent) / std::min(a.extent, b.extent);
+  return ratio > config.max_extent_ratio;
+}
+
+/// Step 1: the gated candidates, for each previous plane its best `max_candidates_per_plane`
+/// by gate score, grouped by previous plane in index order.
+std::vector<Candidate> GatedCandidates(const std::vector<PlaneInfo>& ia,
+                                       const std::vector<PlaneInfo>& ib, const MotionPrior& prior,
+                                       const AssociationConfig& config) {
   const Eigen::Matrix3d R0 = prior.T_prev_curr.linear();
   const Eigen::Vector3d t0 = prior.T_prev_curr.translation();
-
-  std::vector<PlaneInfo> ia, ib;
-  for (const auto& p : prev) ia.push_back(Info(p, rc));
-  for (const auto& p : curr) ib.push_back(Info(p, rc));
-
-  // 1. Gated candidates.
   std::vector<Candidate> cands;
-  const double cos_gate = std::cos(config.max_normal_angle_deg * kDeg);
-  for (int i = 0; i < static_cast<int>(prev.size()); ++i) {
+  for (int i = 0; i < static_cast<int>(ia.size()); ++i) {
     if (!ia[i].ok) continue;
     std::vector<Candidate> mine;
-    for (int j = 0; j < static_cast<int>(curr.size()); ++j) {
-      if (!ib[j].ok) continue;
-      if (config.max_extent_ratio > 0 && ia[i].extent > 0 && ib[j].extent > 0) {
-        const double ratio =
-            std::max(ia[i].extent, ib[j].extent) / std::min(ia[i].extent, ib[j].extent);
-        if (ratio > config.max_extent_ratio) continue;
-      }
-      for (int flip = 0; flip < 2; ++flip) {
-        if (flip && !(ib[j].d < config.flip_max_offset)) break;
-        Candidate c;
-        c.i = i;
-        c.j = j;
-        c.flip = flip != 0;
-        c.n_b = flip ? Eigen::Vector3d(-ib[j].n) : ib[j].n;
-        c.d_b = flip ? -ib[j].d : ib[j].d;
-        const Eigen::Vector3d n_pred = R0 * c.n_b;
-        const double cosang = std::clamp(ia[i].n.dot(n_pred), -1.0, 1.0);
-        if (cosang < cos_gate) continue;
-        const double d_err = ia[i].d - (c.d_b + n_pred.dot(t0));
-        if (std::abs(d_err) > config.max_offset_difference) continue;
-        const double ang = std::acos(cosang) / (config.max_normal_angle_deg * kDeg);
-        const double off = d_err / config.max_offset_difference;
-        c.score = ang * ang + off * off;
-        mine.push_back(c);
-      }
+    for (int j = 0; j < static_cast<int>(ib.size()); ++j) {
+      if (!ib[j].ok || ExtentsDisagree(ia[i], ib[j], config)) continue;
+      GatePair(i, j, ia[i], ib[j], R0, t0, config, &mine);
     }
     std::stable_sort(mine.begin(), mine.end(),
                      [](const Candidate& a, const Candidate& b) { return a.score < b.score; });
@@ -228,165 +238,259 @@ AssociationResult AssociatePlanes(const std::vector<detection::Plane>& prev,
     }
     cands.insert(cands.end(), mine.begin(), mine.end());
   }
+  return cands;
+}
+
+/// Tolerances of the pairwise check that do not depend on the pair.
+struct PairTolerances {
+  Eigen::Vector3d t0 = Eigen::Vector3d::Zero();  ///< prior translation [m]
+  double t_slack = 0.0;     ///< 3 sigma of the prior translation along its worst axis [m]
+  double tol_angle0 = 0.0;  ///< base tolerance on the angle between two normals [rad]
+  double parallel = 0.0;    ///< normals closer than this to (anti)parallel compare offsets [rad]
+};
+
+PairTolerances MakePairTolerances(const MotionPrior& prior, const AssociationConfig& config) {
+  PairTolerances tol;
+  tol.t0 = prior.T_prev_curr.translation();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es_prior(prior.covariance.topLeftCorner<3, 3>());
+  const double sigma_t_prior = std::sqrt(std::max(es_prior.eigenvalues().maxCoeff(), 0.0));
+  tol.t_slack = std::isfinite(sigma_t_prior) ? 3.0 * sigma_t_prior : 3.0;
+  tol.tol_angle0 = config.pair_angle_tolerance_deg * kDeg;
+  tol.parallel = config.parallel_angle_deg * kDeg;
+  return tol;
+}
+
+/// Whether one rigid motion can explain both candidates: distinct planes on both sides, the same
+/// angle between the two normals in both frames, and for (anti)parallel pairs the same offset
+/// difference (sum).
+bool PairConsistent(const Candidate& a, const Candidate& b, const std::vector<PlaneInfo>& ia,
+                    const std::vector<PlaneInfo>& ib, const PairTolerances& tol,
+                    const AssociationConfig& config) {
+  if (a.i == b.i || a.j == b.j) return false;  // one-to-one
+  const PlaneInfo& a1 = ia[a.i];
+  const PlaneInfo& a2 = ia[b.i];
+  const double ang_a = std::acos(std::clamp(a1.n.dot(a2.n), -1.0, 1.0));
+  const double ang_b = std::acos(std::clamp(a.n_b.dot(b.n_b), -1.0, 1.0));
+  const double var_ang = a1.var_n + a2.var_n + ib[a.j].var_n + ib[b.j].var_n;
+  const double tol_angle = std::sqrt(tol.tol_angle0 * tol.tol_angle0 + 9.0 * var_ang);
+  if (std::abs(ang_a - ang_b) > tol_angle) return false;
+  // (Anti)parallel pairs: d_a1 -+ d_a2 = d_b1 -+ d_b2 + (n_a1 -+ n_a2).t, exactly for a rigid
+  // motion, so the prior translation only matters through the small (n_a1 -+ n_a2).
+  const bool par = ang_a < tol.parallel;
+  const bool anti = ang_a > M_PI - tol.parallel;
+  if (!(par || anti)) return true;
+  const double s = par ? -1.0 : 1.0;
+  const Eigen::Vector3d dn = a1.n + s * a2.n;
+  const double e = (a1.d + s * a2.d) - (a.d_b + s * b.d_b) - dn.dot(tol.t0);
+  const double var_off = a1.var_d + a2.var_d + ib[a.j].var_d + ib[b.j].var_d;
+  const double limit =
+      std::sqrt(config.pair_offset_tolerance * config.pair_offset_tolerance + 9.0 * var_off) +
+      dn.norm() * tol.t_slack;
+  return std::abs(e) <= limit;
+}
+
+/// Step 2: the pairwise consistency graph over the candidates, as adjacency bit sets.
+std::vector<Bits> ConsistencyGraph(const std::vector<Candidate>& cands,
+                                   const std::vector<PlaneInfo>& ia,
+                                   const std::vector<PlaneInfo>& ib, const MotionPrior& prior,
+                                   const AssociationConfig& config) {
+  const PairTolerances tol = MakePairTolerances(prior, config);
+  const int n = static_cast<int>(cands.size());
+  const int words = (n + 63) / 64;
+  std::vector<Bits> adj(n, Bits(words, 0));
+  for (int u = 0; u < n; ++u) {
+    for (int v = u + 1; v < n; ++v) {
+      if (!PairConsistent(cands[u], cands[v], ia, ib, tol, config)) continue;
+      adj[u][v / 64] |= std::uint64_t{1} << (v % 64);
+      adj[v][u / 64] |= std::uint64_t{1} << (u % 64);
+    }
+  }
+  return adj;
+}
+
+/// Score of a hypothesis, lowest best: consistency with the prior first (a wrong set of
+/// mismatched planes can outweigh the true matches, and then jumps by decimetres against a prior
+/// of centimetres), then more support, fewer degenerate directions, a smaller covariance.
+using Score = std::tuple<int, double, int, double>;
+
+/// A verified match set with its registration and score.
+struct Hypothesis {
+  Score score;
+  std::vector<PlaneMatch> matches;
+  RegistrationResult registration;
+};
+
+/// Step 4: verification of match sets against the candidates. Each set is solved, the
+/// candidates whose residual (with the motion's own uncertainty) passes the chi^2 gate are kept
+/// one-to-one, best first, and the set is re-solved and scored.
+class Verifier {
+ public:
+  Verifier(const std::vector<detection::Plane>& prev, const std::vector<detection::Plane>& curr,
+           const std::vector<Candidate>& cands, const MotionPrior& prior,
+           const AssociationConfig& config, const RegistrationConfig& rc)
+      : prev_(prev), curr_(curr), cands_(cands), prior_(prior), config_(config), rc_(rc) {}
+
+  PlaneMatch ToMatch(int k) const { return PlaneMatch{cands_[k].i, cands_[k].j, cands_[k].flip}; }
+
+  /// The matches of a clique, in the clique's order.
+  std::vector<PlaneMatch> CliqueMatches(const std::vector<int>& clique) const {
+    std::vector<PlaneMatch> matches;
+    for (int k : clique) matches.push_back(ToMatch(k));
+    return matches;
+  }
+
+  /// The matches of candidates `ks`, sorted by (prev, curr).
+  std::vector<PlaneMatch> AsMatches(const std::vector<int>& ks) const {
+    std::vector<PlaneMatch> matches;
+    for (int k : ks) matches.push_back(ToMatch(k));
+    std::sort(matches.begin(), matches.end(), [](const PlaneMatch& x, const PlaneMatch& y) {
+      return std::tie(x.prev, x.curr) < std::tie(y.prev, y.curr);
+    });
+    return matches;
+  }
+
+  /// Whitened residual (chi^2, 3 dof) of candidate k under motion (R, t) of covariance `cov`.
+  double CandidateChi2(int k, const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                       const Matrix6d& cov) const {
+    internal::MatchData md;
+    if (!internal::MakeMatchData(prev_, curr_, ToMatch(k), rc_, &md)) {
+      return std::numeric_limits<double>::infinity();
+    }
+    const internal::Linearized lin = internal::Linearize(md, R, t, rc_);
+    const Eigen::Matrix3d s = lin.cov + lin.J * cov * lin.J.transpose();
+    const double c2 = lin.r.dot(s.ldlt().solve(lin.r));
+    return std::isfinite(c2) ? c2 : std::numeric_limits<double>::infinity();
+  }
+
+  /// Candidates consistent with motion (R, t) of covariance `cov`, one-to-one, best first.
+  std::vector<int> ConsistentWith(const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                                  const Matrix6d& cov) const {
+    std::vector<std::pair<double, int>> chi2;
+    for (int k = 0; k < static_cast<int>(cands_.size()); ++k) {
+      const double c2 = CandidateChi2(k, R, t, cov);
+      if (c2 <= config_.inlier_chi2) chi2.emplace_back(c2, k);
+    }
+    std::stable_sort(chi2.begin(), chi2.end());
+    std::vector<char> used_a(prev_.size(), 0), used_b(curr_.size(), 0);
+    std::vector<int> verified;
+    for (const auto& [c2, k] : chi2) {
+      if (used_a[cands_[k].i] || used_b[cands_[k].j]) continue;
+      used_a[cands_[k].i] = used_b[cands_[k].j] = 1;
+      verified.push_back(k);
+    }
+    return verified;
+  }
+
+  /// Support of a match set: each match weighs as its smaller plane's pixel count (1 when
+  /// unknown), so the consensus is counted in evidence, not in planes: a few small facets of a
+  /// curved surface, which slide as the sensor moves and agree on a wrong motion, do not outvote
+  /// two large walls.
+  double Support(const std::vector<PlaneMatch>& matches) const {
+    double s = 0.0;
+    for (const auto& m : matches) {
+      s += static_cast<double>(std::max<std::int64_t>(
+          1, std::min(prev_[m.prev].point_count, curr_[m.curr].point_count)));
+    }
+    return s;
+  }
+
+  /// Solves `matches`, keeps the candidates the solution explains, re-solves with those when they
+  /// differ from `matches`, and scores the result.
+  Hypothesis Evaluate(const std::vector<PlaneMatch>& matches) const {
+    Hypothesis h;
+    h.registration = RegisterPlanes(prev_, curr_, matches, prior_, rc_);
+    h.matches = AsMatches(ConsistentWith(h.registration.T_prev_curr.linear(),
+                                         h.registration.T_prev_curr.translation(),
+                                         h.registration.covariance));
+    if (!(h.matches.size() == matches.size() &&
+          std::is_permutation(h.matches.begin(), h.matches.end(), matches.begin()))) {
+      h.registration = RegisterPlanes(prev_, curr_, h.matches, prior_, rc_);
+    }
+    const RegistrationResult& reg = h.registration;
+    const bool off_prior =
+        config_.prior_gate_chi2 > 0 && PriorInnovationChi2(reg, prior_) > config_.prior_gate_chi2;
+    h.score = Score{off_prior ? 1 : 0, -Support(h.matches),
+                    static_cast<int>(reg.degenerate_directions.size()), LogDet(reg.covariance)};
+    return h;
+  }
+
+  /// A set grown from the matches the prior predicts, best first, keeping a match only when the
+  /// solution with it still explains every kept match. It is the answer when no maximum clique
+  /// agrees with the prior, and it competes with them on support otherwise (the clique search
+  /// keeps only sets of the largest size in planes, which need not be the largest in support).
+  std::vector<int> GrowFromPrior() const {
+    std::vector<int> kept;
+    for (int k : ConsistentWith(prior_.T_prev_curr.linear(), prior_.T_prev_curr.translation(),
+                                prior_.covariance)) {
+      std::vector<int> trial = kept;
+      trial.push_back(k);
+      const RegistrationResult reg = RegisterPlanes(prev_, curr_, AsMatches(trial), prior_, rc_);
+      const Eigen::Matrix3d R = reg.T_prev_curr.linear();
+      const Eigen::Vector3d t = reg.T_prev_curr.translation();
+      const bool explained = std::all_of(trial.begin(), trial.end(), [&](int j) {
+        return CandidateChi2(j, R, t, reg.covariance) <= config_.inlier_chi2;
+      });
+      if (explained) kept = std::move(trial);
+    }
+    return kept;
+  }
+
+ private:
+  const std::vector<detection::Plane>& prev_;
+  const std::vector<detection::Plane>& curr_;
+  const std::vector<Candidate>& cands_;
+  const MotionPrior& prior_;
+  const AssociationConfig& config_;
+  const RegistrationConfig& rc_;
+};
+
+/// Keeps `h` in `best` when there is none yet or `h` scores lower (earlier ones win ties).
+void KeepBetter(std::optional<Hypothesis>* best, Hypothesis h) {
+  if (!*best || h.score < (*best)->score) *best = std::move(h);
+}
+
+}  // namespace
+
+AssociationResult AssociatePlanes(const std::vector<detection::Plane>& prev,
+                                  const std::vector<detection::Plane>& curr,
+                                  const MotionPrior& prior, const AssociationConfig& config,
+                                  const RegistrationConfig& rc) {
+  AssociationResult out;
+  const std::vector<PlaneInfo> ia = Infos(prev, rc);
+  const std::vector<PlaneInfo> ib = Infos(curr, rc);
+
+  // 1. Gated candidates.
+  const std::vector<Candidate> cands = GatedCandidates(ia, ib, prior, config);
   out.candidates = static_cast<int>(cands.size());
   if (cands.empty()) {
     out.registration = RegisterPlanes(prev, curr, {}, prior, rc);
     return out;
   }
 
-  // 2. Pairwise consistency graph.
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es_prior(prior.covariance.topLeftCorner<3, 3>());
-  const double sigma_t_prior = std::sqrt(std::max(es_prior.eigenvalues().maxCoeff(), 0.0));
-  const double t_slack = std::isfinite(sigma_t_prior) ? 3.0 * sigma_t_prior : 3.0;
-  const double tol_angle0 = config.pair_angle_tolerance_deg * kDeg;
-  const double parallel = config.parallel_angle_deg * kDeg;
-  const int n = static_cast<int>(cands.size());
-  const int words = (n + 63) / 64;
-  std::vector<Bits> adj(n, Bits(words, 0));
-  for (int u = 0; u < n; ++u) {
-    const Candidate& a = cands[u];
-    for (int v = u + 1; v < n; ++v) {
-      const Candidate& b = cands[v];
-      if (a.i == b.i || a.j == b.j) continue;  // one-to-one
-      const PlaneInfo& a1 = ia[a.i];
-      const PlaneInfo& a2 = ia[b.i];
-      const double ang_a = std::acos(std::clamp(a1.n.dot(a2.n), -1.0, 1.0));
-      const double ang_b = std::acos(std::clamp(a.n_b.dot(b.n_b), -1.0, 1.0));
-      const double var_ang = a1.var_n + a2.var_n + ib[a.j].var_n + ib[b.j].var_n;
-      const double tol_angle = std::sqrt(tol_angle0 * tol_angle0 + 9.0 * var_ang);
-      if (std::abs(ang_a - ang_b) > tol_angle) continue;
-      // (Anti)parallel pairs: d_a1 -+ d_a2 = d_b1 -+ d_b2 + (n_a1 -+ n_a2).t, exactly for a rigid
-      // motion, so the prior translation only matters through the small (n_a1 -+ n_a2).
-      const bool par = ang_a < parallel;
-      const bool anti = ang_a > M_PI - parallel;
-      if (par || anti) {
-        const double s = par ? -1.0 : 1.0;
-        const Eigen::Vector3d dn = a1.n + s * a2.n;
-        const double e = (a1.d + s * a2.d) - (a.d_b + s * b.d_b) - dn.dot(t0);
-        const double var_off = a1.var_d + a2.var_d + ib[a.j].var_d + ib[b.j].var_d;
-        const double tol =
-            std::sqrt(config.pair_offset_tolerance * config.pair_offset_tolerance + 9.0 * var_off) +
-            dn.norm() * t_slack;
-        if (std::abs(e) > tol) continue;
-      }
-      adj[u][v / 64] |= std::uint64_t{1} << (v % 64);
-      adj[v][u / 64] |= std::uint64_t{1} << (u % 64);
-    }
-  }
-
-  // 3. Maximum consistent sets.
-  CliqueSearch search(adj, n, config.max_tied_cliques, config.max_search_nodes);
+  // 2. Pairwise consistency graph; 3. its maximum cliques, the largest consistent sets.
+  const std::vector<Bits> adj = ConsistencyGraph(cands, ia, ib, prior, config);
+  CliqueSearch search(adj, static_cast<int>(cands.size()), config.max_tied_cliques,
+                      config.max_search_nodes);
   search.Run();
   out.search_exhausted = search.exhausted();
   out.tied_cliques = static_cast<int>(search.cliques().size());
   out.clique_size = search.cliques().empty() ? 0 : static_cast<int>(search.cliques()[0].size());
 
-  // 4. Verify each tied clique: solve, keep the candidates whose residual (with the motion's own
-  // uncertainty) passes the chi^2 gate, one-to-one, best first; re-solve; score.
-  auto to_match = [&](int k) { return PlaneMatch{cands[k].i, cands[k].j, cands[k].flip}; };
-  // Whitened residual (chi^2, 3 dof) of candidate k under motion (R, t) of covariance `cov`.
-  auto candidate_chi2 = [&](int k, const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
-                            const Matrix6d& cov) {
-    internal::MatchData md;
-    if (!internal::MakeMatchData(prev, curr, to_match(k), rc, &md)) {
-      return std::numeric_limits<double>::infinity();
-    }
-    const internal::Linearized lin = internal::Linearize(md, R, t, rc);
-    const Eigen::Matrix3d s = lin.cov + lin.J * cov * lin.J.transpose();
-    const double c2 = lin.r.dot(s.ldlt().solve(lin.r));
-    return std::isfinite(c2) ? c2 : std::numeric_limits<double>::infinity();
-  };
-  // Candidates consistent with motion (R, t) of covariance `cov`, one-to-one, best first.
-  auto consistent_with = [&](const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
-                             const Matrix6d& cov) {
-    std::vector<std::pair<double, int>> chi2;
-    for (int k = 0; k < n; ++k) {
-      const double c2 = candidate_chi2(k, R, t, cov);
-      if (c2 <= config.inlier_chi2) chi2.emplace_back(c2, k);
-    }
-    std::stable_sort(chi2.begin(), chi2.end());
-    std::vector<char> used_a(prev.size(), 0), used_b(curr.size(), 0);
-    std::vector<int> verified;
-    for (const auto& [c2, k] : chi2) {
-      if (used_a[cands[k].i] || used_b[cands[k].j]) continue;
-      used_a[cands[k].i] = used_b[cands[k].j] = 1;
-      verified.push_back(k);
-    }
-    return verified;
-  };
-  auto as_matches = [&](const std::vector<int>& ks) {
-    std::vector<PlaneMatch> matches;
-    for (int k : ks) matches.push_back(to_match(k));
-    std::sort(matches.begin(), matches.end(), [](const PlaneMatch& x, const PlaneMatch& y) {
-      return std::tie(x.prev, x.curr) < std::tie(y.prev, y.curr);
-    });
-    return matches;
-  };
-  // Support of a match set: each match weighs as its smaller plane's pixel count (1 when
-  // unknown), so the consensus is counted in evidence, not in planes: three 2000-px facets of a
-  // cylinder, which slide as the sensor moves and agree on a wrong motion, do not outvote two
-  // 100 000-px walls (synthetic room, frames 301-305: 17-35 cm jumps when counted in planes).
-  auto support = [&](const std::vector<PlaneMatch>& matches) {
-    double s = 0.0;
-    for (const auto& m : matches) {
-      s += static_cast<double>(
-          std::max<std::int64_t>(1, std::min(prev[m.prev].point_count, curr[m.curr].point_count)));
-    }
-    return s;
-  };
-  // Score, lowest best: consistency with the prior first (a wrong set of mismatched planes can
-  // outweigh the true matches, and then jumps by decimetres against a prior of centimetres), then
-  // more support, fewer degenerate directions, a smaller covariance.
-  using Score = std::tuple<int, double, int, double>;
-  bool have_best = false;
-  Score best_score;
-  auto consider = [&](const std::vector<PlaneMatch>& matches) {
-    RegistrationResult reg = RegisterPlanes(prev, curr, matches, prior, rc);
-    const std::vector<PlaneMatch> verified = as_matches(
-        consistent_with(reg.T_prev_curr.linear(), reg.T_prev_curr.translation(), reg.covariance));
-    if (!(verified.size() == matches.size() &&
-          std::is_permutation(verified.begin(), verified.end(), matches.begin()))) {
-      reg = RegisterPlanes(prev, curr, verified, prior, rc);
-    }
-    const bool off_prior =
-        config.prior_gate_chi2 > 0 && PriorInnovationChi2(reg, prior) > config.prior_gate_chi2;
-    const Score score{off_prior ? 1 : 0, -support(verified),
-                      static_cast<int>(reg.degenerate_directions.size()), LogDet(reg.covariance)};
-    if (!have_best || score < best_score) {
-      have_best = true;
-      best_score = score;
-      out.matches = verified;
-      out.registration = reg;
-    }
-  };
+  // 4. Verify each tied clique and the set grown from the prior; keep the best scored.
+  const Verifier verifier(prev, curr, cands, prior, config, rc);
+  std::optional<Hypothesis> best;
   for (const auto& clique : search.cliques()) {
-    std::vector<PlaneMatch> matches;
-    for (int k : clique) matches.push_back(to_match(k));
-    consider(matches);
+    KeepBetter(&best, verifier.Evaluate(verifier.CliqueMatches(clique)));
   }
-  // One more hypothesis: grow a set from the matches the prior predicts, best first, keeping a
-  // match only when the solution with it still explains every kept match. It is the answer when
-  // no maximum clique agrees with the prior, and it competes with them on support otherwise (the
-  // clique search keeps only sets of the largest size in planes, which need not be the largest
-  // in support).
-  if (have_best) {
-    std::vector<int> kept;
-    for (int k : consistent_with(prior.T_prev_curr.linear(), prior.T_prev_curr.translation(),
-                                 prior.covariance)) {
-      std::vector<int> trial = kept;
-      trial.push_back(k);
-      const RegistrationResult reg = RegisterPlanes(prev, curr, as_matches(trial), prior, rc);
-      const Eigen::Matrix3d R = reg.T_prev_curr.linear();
-      const Eigen::Vector3d t = reg.T_prev_curr.translation();
-      const bool explained = std::all_of(trial.begin(), trial.end(), [&](int j) {
-        return candidate_chi2(j, R, t, reg.covariance) <= config.inlier_chi2;
-      });
-      if (explained) kept = std::move(trial);
-    }
-    if (!kept.empty()) consider(as_matches(kept));
-    out.prior_inconsistent = std::get<0>(best_score) == 1;
+  if (!best) {
+    out.registration = RegisterPlanes(prev, curr, {}, prior, rc);
+    return out;
   }
-  if (!have_best) out.registration = RegisterPlanes(prev, curr, {}, prior, rc);
+  const std::vector<int> kept = verifier.GrowFromPrior();
+  if (!kept.empty()) KeepBetter(&best, verifier.Evaluate(verifier.AsMatches(kept)));
+  out.prior_inconsistent = std::get<0>(best->score) == 1;
+  out.matches = best->matches;
+  out.registration = best->registration;
   return out;
 }
 

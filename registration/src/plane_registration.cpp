@@ -237,43 +237,56 @@ Pose MakePose(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
   return T;
 }
 
-}  // namespace
-
-RegistrationResult RegisterPlanes(const std::vector<detection::Plane>& prev,
-                                  const std::vector<detection::Plane>& curr,
-                                  const std::vector<PlaneMatch>& matches, const MotionPrior& prior,
-                                  const RegistrationConfig& config) {
-  const Matrix6d prior_cov = SanitizedPriorCovariance(prior);
+/// The prior motion, identity when not finite, with its rotation re-orthonormalised so Exp/Log
+/// stay exact.
+Pose SanitizedPriorPose(const MotionPrior& prior) {
   Pose prior_pose = prior.T_prev_curr;
   if (!prior_pose.matrix().allFinite()) prior_pose = Pose::Identity();
-  // Re-orthonormalise the prior rotation so Exp/Log stay exact.
   prior_pose.linear() = Eigen::Quaterniond(prior_pose.linear()).normalized().toRotationMatrix();
+  return prior_pose;
+}
 
-  // The answer when nothing can be determined: the prior, everything degenerate.
+/// The answer when nothing can be determined: the prior, everything degenerate.
+RegistrationResult PriorOnlyResult(const Pose& prior_pose, const Matrix6d& prior_cov) {
   RegistrationResult fallback;
   fallback.T_prev_curr = prior_pose;
   fallback.covariance = prior_cov;
   fallback.degenerate = true;
   fallback.used_prior = true;
   for (int k = 0; k < 6; ++k) fallback.degenerate_directions.push_back(Vector6d::Unit(k));
+  return fallback;
+}
 
+/// The usable matches in residual form, in the order of `matches`.
+std::vector<MatchData> CollectMatchData(const std::vector<detection::Plane>& prev,
+                                        const std::vector<detection::Plane>& curr,
+                                        const std::vector<PlaneMatch>& matches,
+                                        const RegistrationConfig& config) {
   std::vector<MatchData> data;
   data.reserve(matches.size());
   for (const PlaneMatch& match : matches) {
     MatchData m;
     if (internal::MakeMatchData(prev, curr, match, config, &m)) data.push_back(m);
   }
-  if (data.empty()) return fallback;
+  return data;
+}
 
-  Eigen::Matrix3d R = prior_pose.linear();
-  Eigen::Vector3d t = prior_pose.translation();
+/// Which translation directions and rotation axes the planes determine, and each match's weight
+/// on its normal.
+struct Observability {
+  std::vector<Eigen::Vector3d> obs_t, null_t, obs_r, null_r;
+  std::vector<double> w_normal;  ///< 2 / trace of the normal part of the residual covariance
+};
 
-  // 1. Observability, from the measured normals in prev (independent of the motion estimate),
-  // weighted by the residual covariances at the prior. Rotation is seen only through normals,
-  // translation only through offsets along the normals.
+/// Observability from the measured normals in prev (independent of the motion estimate),
+/// weighted by the residual covariances at (R, t). Rotation is seen only through normals,
+/// translation only through offsets along the normals.
+Observability AnalyseObservability(const std::vector<MatchData>& data, const Eigen::Matrix3d& R,
+                                   const Eigen::Vector3d& t, const RegistrationConfig& config) {
+  Observability o;
   Eigen::Matrix3d h_rot = Eigen::Matrix3d::Zero();
   Eigen::Matrix3d h_trans = Eigen::Matrix3d::Zero();
-  std::vector<double> w_normal(data.size());
+  o.w_normal.resize(data.size());
   for (std::size_t i = 0; i < data.size(); ++i) {
     const MatchData& m = data[i];
     const Linearized lin = internal::Linearize(m, R, t, config);
@@ -281,125 +294,176 @@ RegistrationResult RegisterPlanes(const std::vector<detection::Plane>& prev,
     const Eigen::Matrix<double, 2, 3> jr = m.tangent.transpose() * Skew(m.n_a);
     h_rot += jr.transpose() * wn * jr;
     h_trans += m.n_a * m.n_a.transpose() / lin.cov(2, 2);
-    w_normal[i] = 2.0 / lin.cov.topLeftCorner<2, 2>().trace();
+    o.w_normal[i] = 2.0 / lin.cov.topLeftCorner<2, 2>().trace();
   }
-  std::vector<Eigen::Vector3d> obs_t, null_t, obs_r, null_r;
-  SplitDirections(h_trans, config.max_translation_sigma, config.min_eigen_ratio, &obs_t, &null_t);
-  SplitDirections(h_rot, config.max_rotation_sigma, config.min_eigen_ratio, &obs_r, &null_r);
+  SplitDirections(h_trans, config.max_translation_sigma, config.min_eigen_ratio, &o.obs_t,
+                  &o.null_t);
+  SplitDirections(h_rot, config.max_rotation_sigma, config.min_eigen_ratio, &o.obs_r, &o.null_r);
+  return o;
+}
 
-  // 2. Rotation in closed form: maximise sum w n_a^T R n_b, i.e. R = U diag(1,1,det) V^T from
-  // the SVD of M = sum w n_a n_b^T (weighted Kabsch; the determinant fix keeps a proper rotation
-  // and also settles the rank-2 case of exactly two distinct normals).
-  if (null_r.empty()) {
+/// Rotation in closed form. With every axis observable: maximise sum w n_a^T R n_b, i.e.
+/// R = U diag(1,1,det) V^T from the SVD of M = sum w n_a n_b^T (weighted Kabsch; the determinant
+/// fix keeps a proper rotation and also settles the rank-2 case of exactly two distinct normals).
+/// With all normals (anti)parallel: the prior rotated minimally so the best plane lines up; the
+/// rotation about that normal stays the prior's. Otherwise R is left as it is.
+void ClosedFormRotation(const std::vector<MatchData>& data, const Observability& o,
+                        Eigen::Matrix3d* R) {
+  if (o.null_r.empty()) {
     Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
     for (std::size_t i = 0; i < data.size(); ++i) {
-      M += w_normal[i] * data[i].n_a * data[i].n_b.transpose();
+      M += o.w_normal[i] * data[i].n_a * data[i].n_b.transpose();
     }
     Eigen::JacobiSVD<Eigen::Matrix3d> svd(M, Eigen::ComputeFullU | Eigen::ComputeFullV);
     Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
     D(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
     const Eigen::Matrix3d r_svd = svd.matrixU() * D * svd.matrixV().transpose();
-    if (r_svd.allFinite()) R = r_svd;
-  } else if (null_r.size() == 1) {
-    // All normals (anti)parallel: rotate the prior minimally so the best plane lines up; the
-    // rotation about that normal stays the prior's.
-    const std::size_t best = std::max_element(w_normal.begin(), w_normal.end()) - w_normal.begin();
+    if (r_svd.allFinite()) *R = r_svd;
+  } else if (o.null_r.size() == 1) {
+    const std::vector<double>& w = o.w_normal;
+    const std::size_t best = std::max_element(w.begin(), w.end()) - w.begin();
     const Eigen::Quaterniond q =
-        Eigen::Quaterniond::FromTwoVectors(R * data[best].n_b, data[best].n_a);
-    if (q.coeffs().allFinite()) R = q.toRotationMatrix() * R;
+        Eigen::Quaterniond::FromTwoVectors(*R * data[best].n_b, data[best].n_a);
+    if (q.coeffs().allFinite()) *R = q.toRotationMatrix() * *R;
   }
+}
 
-  // 6x6 bases of the observable and degenerate subspaces (pure translation / pure rotation).
-  Eigen::MatrixXd O(6, obs_t.size() + obs_r.size());
-  Eigen::MatrixXd N(6, null_t.size() + null_r.size());
-  O.setZero();
-  N.setZero();
-  {
-    int k = 0;
-    for (const auto& v : obs_t) O.col(k++).head<3>() = v;
-    for (const auto& v : obs_r) O.col(k++).tail<3>() = v;
-    k = 0;
-    for (const auto& v : null_t) N.col(k++).head<3>() = v;
-    for (const auto& v : null_r) N.col(k++).tail<3>() = v;
+/// 6xk bases of the observable (O) and degenerate (N) subspaces; each column is a pure
+/// translation or a pure rotation.
+void SubspaceBases(const Observability& o, Eigen::MatrixXd* O, Eigen::MatrixXd* N) {
+  O->resize(6, o.obs_t.size() + o.obs_r.size());
+  N->resize(6, o.null_t.size() + o.null_r.size());
+  O->setZero();
+  N->setZero();
+  int k = 0;
+  for (const auto& v : o.obs_t) O->col(k++).head<3>() = v;
+  for (const auto& v : o.obs_r) O->col(k++).tail<3>() = v;
+  k = 0;
+  for (const auto& v : o.null_t) N->col(k++).head<3>() = v;
+  for (const auto& v : o.null_r) N->col(k++).tail<3>() = v;
+}
+
+/// Translation by weighted least squares on the offsets, only along the observable translation
+/// directions; the degenerate ones keep their value: minimise
+/// sum w (d_a - d_b - m.(t0 + O_t y))^2 with m = R n_b.
+void SolveTranslation(const std::vector<MatchData>& data, const Observability& o,
+                      const Eigen::Matrix3d& R, const RegistrationConfig& config,
+                      Eigen::Vector3d* t) {
+  if (o.obs_t.empty()) return;
+  Eigen::MatrixXd ot(3, o.obs_t.size());
+  for (std::size_t k = 0; k < o.obs_t.size(); ++k) ot.col(k) = o.obs_t[k];
+  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d b = Eigen::Vector3d::Zero();
+  for (const MatchData& m : data) {
+    const Linearized lin = internal::Linearize(m, R, *t, config);
+    const Eigen::Vector3d n_pred = R * m.n_b;
+    const double w = 1.0 / lin.cov(2, 2);
+    A += w * n_pred * n_pred.transpose();
+    b += w * n_pred * (m.d_a - m.d_b - n_pred.dot(*t));
   }
+  const Eigen::MatrixXd a_red = ot.transpose() * A * ot;
+  const Eigen::VectorXd y = a_red.ldlt().solve(ot.transpose() * b);
+  if (y.allFinite()) *t += ot * y;
+}
 
-  // 3. Translation by weighted least squares on the offsets, only along the observable
-  // translation directions; the degenerate ones keep the prior's value:
-  // minimise sum w (d_a - d_b - m.(t0 + O_t y))^2 with m = R n_b.
-  if (!obs_t.empty()) {
-    Eigen::MatrixXd ot(3, obs_t.size());
-    for (std::size_t k = 0; k < obs_t.size(); ++k) ot.col(k) = obs_t[k];
-    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
-    Eigen::Vector3d b = Eigen::Vector3d::Zero();
-    for (const MatchData& m : data) {
-      const Linearized lin = internal::Linearize(m, R, t, config);
-      const Eigen::Vector3d n_pred = R * m.n_b;
-      const double w = 1.0 / lin.cov(2, 2);
-      A += w * n_pred * n_pred.transpose();
-      b += w * n_pred * (m.d_a - m.d_b - n_pred.dot(t));
+/// Gauss-Newton over all matched planes, restricted to the observable subspace O; updates
+/// (R, t), the iteration count and convergence flag of `res`, and returns the sums at the final
+/// estimate.
+Accumulated GaussNewton(const std::vector<MatchData>& data, const Eigen::MatrixXd& O,
+                        const RegistrationConfig& config, Eigen::Matrix3d* R, Eigen::Vector3d* t,
+                        RegistrationResult* res) {
+  res->converged = config.max_iterations == 0;
+  Accumulated acc = Accumulate(data, *R, *t, config);
+  if (O.cols() == 0) {
+    res->converged = true;  // nothing to estimate from the planes: the prior is the answer
+    return acc;
+  }
+  for (int it = 0; it < config.max_iterations; ++it) {
+    const Eigen::MatrixXd h_red = O.transpose() * acc.H * O;
+    const Eigen::VectorXd y = h_red.ldlt().solve(-O.transpose() * acc.g);
+    if (!y.allFinite()) break;
+    const Vector6d delta = O * y;
+    const Pose T_new = BoxPlus(MakePose(*R, *t), delta);
+    const Accumulated acc_new = Accumulate(data, T_new.linear(), T_new.translation(), config);
+    res->iterations = it + 1;
+    if (!(acc_new.chi2 <= acc.chi2 * (1.0 + 1e-12) + 1e-300)) {
+      // Not a descent step: the estimate is at the minimum to numerical precision.
+      res->converged = true;
+      break;
     }
-    const Eigen::MatrixXd a_red = ot.transpose() * A * ot;
-    const Eigen::VectorXd y = a_red.ldlt().solve(ot.transpose() * b);
-    if (y.allFinite()) t += ot * y;
-  }
-
-  // 4. Gauss-Newton over all matched planes, restricted to the observable subspace.
-  RegistrationResult res;
-  res.converged = config.max_iterations == 0;
-  Accumulated acc = Accumulate(data, R, t, config);
-  if (O.cols() > 0) {
-    for (int it = 0; it < config.max_iterations; ++it) {
-      const Eigen::MatrixXd h_red = O.transpose() * acc.H * O;
-      const Eigen::VectorXd y = h_red.ldlt().solve(-O.transpose() * acc.g);
-      if (!y.allFinite()) break;
-      const Vector6d delta = O * y;
-      const Pose T_new = BoxPlus(MakePose(R, t), delta);
-      const Accumulated acc_new = Accumulate(data, T_new.linear(), T_new.translation(), config);
-      res.iterations = it + 1;
-      if (!(acc_new.chi2 <= acc.chi2 * (1.0 + 1e-12) + 1e-300)) {
-        // Not a descent step: we are at the minimum to numerical precision.
-        res.converged = true;
-        break;
-      }
-      R = T_new.linear();
-      t = T_new.translation();
-      acc = acc_new;
-      if (delta.norm() < config.convergence_step) {
-        res.converged = true;
-        break;
-      }
+    *R = T_new.linear();
+    *t = T_new.translation();
+    acc = acc_new;
+    if (delta.norm() < config.convergence_step) {
+      res->converged = true;
+      break;
     }
-  } else {
-    res.converged = true;  // nothing to estimate from the planes: the prior is the answer
   }
+  return acc;
+}
 
-  // 5. Covariance: the planes' inverse information in the observable subspace, the prior's
-  // marginal in the degenerate one (they are uncorrelated to first order: a degenerate direction
-  // does not move any plane residual).
+/// Covariance: the planes' inverse information H in the observable subspace O, the prior's
+/// marginal in the degenerate one N (they are uncorrelated to first order: a degenerate direction
+/// does not move any plane residual).
+Matrix6d SubspaceCovariance(const Matrix6d& H, const Eigen::MatrixXd& O, const Eigen::MatrixXd& N,
+                            const Matrix6d& prior_cov) {
   Matrix6d cov = Matrix6d::Zero();
   if (O.cols() > 0) {
-    const Eigen::MatrixXd h_red = O.transpose() * acc.H * O;
+    const Eigen::MatrixXd h_red = O.transpose() * H * O;
     cov += O * h_red.ldlt().solve(Eigen::MatrixXd::Identity(O.cols(), O.cols())) * O.transpose();
   }
   if (N.cols() > 0) cov += N * (N.transpose() * prior_cov * N) * N.transpose();
   cov = 0.5 * (cov + cov.transpose());
+  return cov;
+}
 
-  res.T_prev_curr = MakePose(R, t);
-  res.covariance = cov;
-  res.information = acc.H;
-  res.degenerate = N.cols() > 0;
-  res.used_prior = N.cols() > 0;
-  for (int k = 0; k < N.cols(); ++k) res.degenerate_directions.push_back(N.col(k));
-  for (const MatchData& m : data) res.inliers.push_back(m.match);
+/// Fills the pose, covariance, degeneracy and residual statistics of `res`.
+void FillResult(const std::vector<MatchData>& data, const Eigen::Matrix3d& R,
+                const Eigen::Vector3d& t, const Accumulated& acc, const Matrix6d& cov,
+                const Eigen::MatrixXd& N, RegistrationResult* res) {
+  res->T_prev_curr = MakePose(R, t);
+  res->covariance = cov;
+  res->information = acc.H;
+  res->degenerate = N.cols() > 0;
+  res->used_prior = N.cols() > 0;
+  for (int k = 0; k < N.cols(); ++k) res->degenerate_directions.push_back(N.col(k));
+  for (const MatchData& m : data) res->inliers.push_back(m.match);
   const double count = static_cast<double>(data.size());
-  res.residual_rms = std::sqrt(acc.sum_sq_offset / count);
-  res.normal_residual_rms = std::sqrt(acc.sum_sq_angle / count);
-  res.chi2 = acc.chi2;
+  res->residual_rms = std::sqrt(acc.sum_sq_offset / count);
+  res->normal_residual_rms = std::sqrt(acc.sum_sq_angle / count);
+  res->chi2 = acc.chi2;
+}
 
-  if (!res.T_prev_curr.matrix().allFinite() || !res.covariance.allFinite() ||
-      !res.information.allFinite() || !std::isfinite(res.chi2)) {
-    return fallback;
-  }
+bool AllFinite(const RegistrationResult& res) {
+  return res.T_prev_curr.matrix().allFinite() && res.covariance.allFinite() &&
+         res.information.allFinite() && std::isfinite(res.chi2);
+}
+
+}  // namespace
+
+RegistrationResult RegisterPlanes(const std::vector<detection::Plane>& prev,
+                                  const std::vector<detection::Plane>& curr,
+                                  const std::vector<PlaneMatch>& matches, const MotionPrior& prior,
+                                  const RegistrationConfig& config) {
+  const Matrix6d prior_cov = SanitizedPriorCovariance(prior);
+  const Pose prior_pose = SanitizedPriorPose(prior);
+  const std::vector<MatchData> data = CollectMatchData(prev, curr, matches, config);
+  if (data.empty()) return PriorOnlyResult(prior_pose, prior_cov);
+
+  Eigen::Matrix3d R = prior_pose.linear();
+  Eigen::Vector3d t = prior_pose.translation();
+  // 1. Observability at the prior; 2. rotation in closed form; 3. translation along the
+  // observable directions; 4. Gauss-Newton in the observable subspace; 5. covariance.
+  const Observability o = AnalyseObservability(data, R, t, config);
+  ClosedFormRotation(data, o, &R);
+  Eigen::MatrixXd O, N;
+  SubspaceBases(o, &O, &N);
+  SolveTranslation(data, o, R, config, &t);
+  RegistrationResult res;
+  const Accumulated acc = GaussNewton(data, O, config, &R, &t, &res);
+  const Matrix6d cov = SubspaceCovariance(acc.H, O, N, prior_cov);
+  FillResult(data, R, t, acc, cov, N, &res);
+  if (!AllFinite(res)) return PriorOnlyResult(prior_pose, prior_cov);
   return res;
 }
 

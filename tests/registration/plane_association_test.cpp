@@ -235,7 +235,7 @@ TEST(PlaneAssociation, SupportOutweighsMoreSmallPlanesThatMovedTogether) {
   // 3.4 deg away, inside the 5 cm / 0.05 rad prior's gate, so the prior alone cannot tell the two
   // sets apart. The largest pairwise-consistent set mixes both (3.4 deg is within the pairwise
   // angle tolerance); the walls, grown from the prior's prediction and counted in pixels, must
-  // win. (Counted in planes, as before, the answer was the one wall both motions explain.)
+  // win. (Counted in planes, the answer would be the one wall both motions explain.)
   const MovingObjectScene scene = MakeMovingObjectScene(100000, 2000, 0.10, 0.06);
   const MotionPrior prior = PriorAt(scene.T, 0.05);
   const AssociationResult a = AssociatePlanes(scene.prev, scene.curr, prior);

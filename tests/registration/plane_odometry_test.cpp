@@ -173,9 +173,9 @@ TEST(PlaneOdometry, SyntheticCorridorAxisIsNotHeldAtTheStartingVelocity) {
   const double walked = (gt.translation() - seq.GroundTruth(0)->translation()).norm();
   const double along = odo.T_world_sensor().translation().x() - gt.translation().x();
   RecordProperty("along_axis_error_m", std::to_string(along));
-  // Measured: 0.32 m short of 0.67 m walked; 0.50 m short when the walls' pairs also inform the
-  // axis. Still short by half: the normals of pipes metres away are noisy, which attenuates the
-  // motion the alignment sees; over the scene's whole 10 m run the drift is 0.15 m (bench).
+  // Measured: 0.32 m short of 0.67 m walked. Short by about half: the normals of pipes metres
+  // away are noisy, which attenuates the motion the alignment sees; over the scene's whole 10 m
+  // run the drift is 0.15 m (bench).
   EXPECT_LT(std::abs(along), 0.55 * walked) << "walked " << walked << " m";
 }
 

@@ -13,8 +13,8 @@
 ///    "planes": [{id, normal, d, centroid, area, observed_area, point_count, rms, observations,
 ///    first_frame, last_frame, color, polygons: [[[x, y, z], ...], ...]}]} (metres; the normal
 ///    points away from the sensors that saw the plane; one polygon per separate part of the plane,
-///    largest first, each counter-clockwise about the normal; area is their sum). Version 1 had a
-///    single "polygon" (the largest part only).
+///    largest first, each counter-clockwise about the normal; area is their sum). Version 1 files
+///    carry a single "polygon" instead (the largest part only).
 /// Mesh faces are wound counter-clockwise as seen by the observers (right-hand face normal =
 /// -normal), so viewers with back-face culling show each plane from the side it was seen from.
 #include <Eigen/Core>

@@ -9,8 +9,7 @@
 /// one voxel; the ray casting cost is per ray), transformed to the world and inserted with
 /// insertPointCloud(points, sensor origin, max_range): voxels along each ray become more likely
 /// free (prob_miss), the end voxel more likely occupied (prob_hit); rays longer than max_range only
-/// clear up to max_range (far depth is noisy, and long grazing rays erode floors: PRIOR-ART.md,
-/// OctoMap).
+/// clear up to max_range (far depth is noisy, and long grazing rays erode floors).
 #include <Eigen/Core>
 #include <cstddef>
 #include <memory>

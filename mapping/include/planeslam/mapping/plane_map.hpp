@@ -78,9 +78,10 @@ struct PlaneMapConfig {
   /// [m] During SLAM (Refit after each optimisation), map planes whose extents are apart merge
   /// only when each one's centroid lies within this of the other plane (and their normals within
   /// merge_max_normal_angle_deg): the merged plane is one landmark that ties the keyframes seeing
-  /// distant parts of one surface. Before the loop closes such parts lie a few cm apart; merging
-  /// them at merge_max_offset then pulls the poses (room ATE 0.89-1.33 -> 1.1-13 cm, noise seeds
-  /// 1-6), 0.02 improves it (0.86-1.33 -> 0.70-1.30 cm). 0 = only touching planes merge.
+  /// distant parts of one surface. Before the loop closes, drift sets such parts a few
+  /// centimetres apart, so merging them at merge_max_offset would pull the poses towards a
+  /// drifted plane; this tighter offset merges only parts that already agree. 0 = only touching
+  /// planes merge.
   double refit_merge_across_gaps_offset = 0.02;
   int min_observation_points = 50;  ///< [points] smaller detected planes are not added to the map
   double sample_cell_size = 0.04;   ///< [m] grid cell of the per-observation samples

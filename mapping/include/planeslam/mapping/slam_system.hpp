@@ -37,23 +37,16 @@ struct SlamConfig {
   double keyframe_translation = 0.20;   ///< [m] new keyframe after this motion since the last one
   double keyframe_rotation_deg = 12.0;  ///< [deg] same for rotation
   /// [planes] new keyframe when fewer planes match the keyframe and the frame has planes the
-  /// keyframe does not match. 4 rather than 3: three matched planes are often two walls and a box
-  /// face, the keyframe is then renewed before tracking degrades (synthetic room, 565 frames: ATE
-  /// 15.8 -> 5.8 cm). A frame whose planes all match stays with its keyframe: where only two
-  /// walls are in view, renewing the keyframe every frame chains one relative-pose error per
-  /// frame (synthetic room: 212 -> 66 keyframes, ATE 2.44 -> 2.04 cm). 6 rather than 4: a
-  /// frame that sees 8 planes but matches 4 of its keyframe's leaves half of what it sees out of
-  /// its registration and out of the graph (synthetic room, noise seeds 1-6: ATE 1.21 / 0.91 /
-  /// 1.07 / 1.47 / 0.93 / 1.53 cm with 4, 0.93 / 0.89 / 0.89 / 1.33 / 0.86 / 0.90 cm with 6, 65
-  /// -> 93 keyframes and 22 -> 59 loop closures; 5: 1.07 / 0.83 / 0.90, 7: 0.89 / 2.19 / 0.81,
-  /// 8: 1.02 / 1.03 / 0.84 cm for seeds 1-3; TUM fr3 1.20 -> 1.15 cm).
+  /// keyframe does not match. Three matched planes are often two walls and a box face, so the
+  /// keyframe is renewed before tracking degrades; and a frame that sees many planes but matches
+  /// few of its keyframe's would leave the rest of what it sees out of its registration and out of
+  /// the graph. A frame whose planes all match stays with its keyframe: where only two walls are
+  /// in view, renewing the keyframe every frame would chain one relative-pose error per frame.
   int keyframe_min_matches = 6;
   /// Prior covariance of the constant-velocity prediction, per frame: 1 sigma [m] and [rad].
-  /// 0.05 m / 0.05 rad, although the real change of velocity is smaller (TUM fr3 ground truth:
-  /// 4 mm per frame at the 99th percentile): tighter, the association's prior preference and the
-  /// gate below refuse the small planes that fix directions the large ones leave open (measured
-  /// 2026-11-30 without disjoint merging and with the last motion as velocity: TUM fr3 ATE
-  /// 2.81 cm at 0.05, 11.8 cm at 0.03 and 0.02; synthetic room 6.6 / 6.8 / 7.2 cm).
+  /// Looser than the real change of velocity between frames (a few millimetres for a hand-held
+  /// camera): tighter, the association's prior preference and the gate below refuse the small
+  /// planes that fix directions the large ones leave open.
   double prior_translation_sigma = 0.05;
   double prior_rotation_sigma = 0.05;
   /// A tracking result whose correction to the prior has a chi-square (6 dof; covariance: the
@@ -63,10 +56,8 @@ struct SlamConfig {
   double prior_gate_chi2 = 22.46;
   /// The change of velocity in one frame the gate still finds plausible, 1 sigma [m], [rad]:
   /// tighter than the association's prior above, which must admit the small planes that fix
-  /// open directions. A sliver of a table top holding a strip of the table's edge face had set
-  /// the roll of frames 402-413 of the synthetic room 4 deg off (room ATE, noise seeds 1-3:
-  /// 1.84 / 1.54 / 1.70 cm with the association's 0.05 / 0.05, 1.59 / 1.40 / 1.51 cm with
-  /// 0.01 / 0.005; TUM fr3 1.20 cm both).
+  /// open directions. A sliver of a table top that holds a strip of the table's edge face can
+  /// otherwise set the roll of a run of frames several degrees off.
   double gate_translation_sigma = 0.01;
   double gate_rotation_sigma = 0.005;
   /// After this many refused frames in a row the result is accepted anyway (the prior, not the
@@ -79,35 +70,29 @@ struct SlamConfig {
   bool hold_velocity_when_degenerate = true;
   /// The velocity of the constant-velocity prediction is the mean rate of the well-determined
   /// frame-to-frame motions of the last this many seconds (0: the last one alone). A single
-  /// frame's error then does not become the velocity held through a degenerate stretch (synthetic
-  /// room, noise seeds 1-3: ATE 6.6 / 8.2 / 24.1 cm with the last motion alone, 3.8 / 4.3 / 3.4
-  /// cm with 0.5 s; TUM fr3 1.29 cm both) [s].
+  /// frame's error then does not become the velocity held through a degenerate stretch [s].
   double velocity_window = 0.5;
   /// While the rotation rate is held (the planes leave a rotation open), continue it along the
   /// least-squares trend of its window (constant angular acceleration) instead of its mean,
   /// which lags a turn that speeds up by a quarter second: one blank wall in view while the
-  /// camera turns. Synthetic room, seeds 1-3, without loop closures: RPE over 1 s 1.62 / 1.89 /
-  /// 1.86 -> 1.47 / 1.44 / 1.60 cm and 1.82 / 1.89 / 1.75 -> 1.03 / 1.14 / 0.93 deg; ATE with
-  /// loop closures 1.47 / 1.25 / 1.39 -> 1.21 / 0.91 / 1.07 cm; TUM fr3 1.20 cm both. (The trend
-  /// on every frame instead: ATE 1.29 / 1.02 / 1.20 cm, but more drift without loop closures.)
+  /// camera turns. Only held rotations follow the trend: on every frame it would add drift where
+  /// the planes determine the rotation anyway.
   bool continue_held_turn = true;
   /// Fill directions the planes leave open by point-to-plane alignment of the clouds. Off by
-  /// default: on the synthetic room (first 320 frames, noise on) it raised ATE from 5.3 to 7.7 cm,
-  /// its corrections on walls seen at a slant are biased.
+  /// default: its corrections on walls seen at a slant are biased.
   bool point_to_plane_fill = false;
   /// Optimise the map planes with the poses: every map plane seen from at least two keyframes
   /// becomes a landmark of the pose graph, each keyframe's detection of it a residual, so a wall
-  /// ties together keyframes far apart in the chain without a loop closure (TUM fr3 ATE 1.34 ->
-  /// 1.15 cm; synthetic room, noise seeds 1-3: 2.04 / 2.01 / 2.13 -> 2.00 / 1.91 / 2.07 cm).
+  /// ties together keyframes far apart in the chain without a loop closure.
   bool plane_landmarks = true;
   /// Floors of a detected plane's uncertainty in those residuals: its own covariance (from its
   /// pixels) says nothing of calibration, a plane cut by the image border or a crease [rad], [m].
   double landmark_normal_sigma = 0.005;
   double landmark_offset_sigma = 0.005;
   /// A keyframe's detection joins its map plane's landmark only within these of the plane at
-  /// the current poses [deg], [m]. The map associates loosely (a fragment a few degrees off, or
-  /// a board 2 cm in front of its wall, still extends the wall's outline); with 2 deg / 5 cm
-  /// the room gave 2.17 cm, with 1 deg / 1.5 cm 2.00 cm.
+  /// the current poses [deg], [m]. Tighter than the map's own association, which is loose on
+  /// purpose (a fragment a few degrees off, or a board a few centimetres in front of its wall,
+  /// still extends the wall's outline) but would then pull the poses towards the wrong plane.
   double landmark_gate_deg = 1.0;
   double landmark_gate_offset = 0.015;
   /// Frames between two keyframes take their share of the optimiser's correction of the

@@ -31,12 +31,10 @@ struct PlaneOdometryConfig {
   double prior_translation_sigma = 0.05;
   double prior_rotation_sigma = 0.05;  ///< same for rotation [rad]
   /// The registration's systematic_point_sigma for frame-to-frame odometry; it replaces the one
-  /// in `registration` [m]. 1 mm: synthetic room (Kinect noise) RPE per frame 0.25 cm / 0.127 deg
-  /// -> 0.15 cm / 0.072 deg, whose worst frames registered on a sliver of a plane at the image
-  /// border; TUM fr3 structure_notexture_far RPE at 1 s 1.91 cm / 0.690 deg -> 1.63 cm / 0.624
-  /// deg. SLAM tracking keeps 0: there it leaves more loop registrations degenerate (room: 59 ->
-  /// 38 closures, ATE 0.92 -> 1.84 cm; TUM ATE 1.20 -> 0.93 cm) until its thresholds are tuned
-  /// for it.
+  /// in `registration` [m]. A millimetre keeps the odometry from registering on a sliver of a
+  /// plane at the image border, whose tilt its pixel noise alone makes look well determined. SLAM
+  /// tracking keeps 0: there it leaves more loop registrations degenerate, as the loop-closure
+  /// thresholds are set for planes without that error.
   double systematic_point_sigma = 0.001;
   /// Velocity is not extrapolated over a gap longer than this; the prior is then "no motion"
   /// with MotionPrior's weak default covariance [s].
@@ -47,10 +45,8 @@ struct PlaneOdometryConfig {
   /// Track() detects and registers planes on every n-th row and column of the cloud
   /// (datasets::Decimate); 1 = full resolution. Kinect-class depth is correlated over several
   /// pixels (the disparity comes from correlation windows), so half resolution keeps most of
-  /// its plane information at a quarter of the detection time; config/tum_fr3.yaml uses 2 (TUM
-  /// fr3: 10.0 -> 3.2 ms a frame, RPE at 1 s 1.63 -> 1.08 cm). The synthetic sensors' noise is
-  /// independent per pixel, and there full resolution pays (room RPE per frame 0.18 cm / 0.073
-  /// deg at 1, 0.43 cm / 0.086 deg at 2).
+  /// its plane information at a quarter of the detection time; config/tum_fr3.yaml uses 2. The
+  /// synthetic sensors' noise is independent per pixel, and there full resolution pays.
   int decimation = 1;
 
   /// Problems in this struct and the nested ones, empty when fine.

@@ -1,7 +1,7 @@
 #pragma once
 /// Error types shared by every planeslam module.
 ///
-/// Tiers (see the architecture page): a broken precondition in code is a PLANESLAM_CHECK failure;
+/// Tiers: a broken precondition in code is a PLANESLAM_CHECK failure;
 /// expected data conditions (no planes, degenerate geometry) are flags in result structs; IO and
 /// config failures are IoError / ConfigError carrying the file (and line or key) and the reason.
 /// main() turns an exception into one line on stderr and a non-zero exit code.

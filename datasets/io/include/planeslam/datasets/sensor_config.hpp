@@ -32,7 +32,7 @@ struct SensorConfig {
   double gt_max_time_difference = 0.02;
   /// LiDAR (.bin) range image: rows by elevation, columns by azimuth. The HDL-64E at 10 Hz fires
   /// about 2083 times per revolution (0.1728 deg), so 2083 columns hold about one point per cell
-  /// (KITTI scans: 96 % of points placed, against 95 % with 2048 columns; see kitti_scan_test).
+  /// (a coarser grid such as 2048 columns puts more pairs of returns into one cell).
   int lidar_rows = 64;
   int lidar_cols = 2083;
   /// How a scan point finds its row: "scan_order" recovers the laser ring from the point order of
@@ -42,8 +42,8 @@ struct SensorConfig {
   std::string lidar_row_mode = "scan_order";
   /// When a point's cell is taken, it may move this many columns sideways to a free cell (the
   /// nearer side first). KITTI rings hold 1960-2160 points, some only half a step apart, so
-  /// neighbours share a cell; shifting by one column (0.17 deg) keeps them (KITTI: 92 % of points
-  /// placed without shifting, 96 % with). 0 = the nearer point wins.
+  /// neighbours share a cell; shifting by one column (0.17 deg) keeps most of them. 0 = the
+  /// nearer point wins.
   int lidar_column_shift = 1;
   double lidar_elevation_max_deg = 2.0;    ///< [deg] elevation of the top row's centre (HDL-64E)
   double lidar_elevation_min_deg = -24.9;  ///< [deg] elevation of the bottom row's centre

@@ -40,8 +40,9 @@ SyntheticWriteSummary WriteSyntheticSequence(
     const SyntheticSequence& sequence, const std::string& folder,
     const std::function<bool(std::size_t done)>& progress = {});
 
-/// Depth (grey: near bright, far dark over the frame's range up to max_range, black = none) and labels (a colour per plane id, grey for
-/// curved surfaces, black = none) side by side, 2 * width x height.
+/// Depth (grey: near bright, far dark over the frame's range up to max_range, black = none) and
+/// labels (a colour per plane id, grey for curved surfaces, black = none) side by side,
+/// 2 * width x height.
 ImageRgb8 MakeSyntheticPreview(const SyntheticFrame& frame, double max_range);
 
 
