@@ -100,7 +100,7 @@ class BenchCommand : public Command {
         "of median times (PCL / method).\n"
         "\nExamples:\n"
         "  planeslam bench detect                         default frame set, 5 repetitions\n"
-        "  planeslam bench detect --methods grid3,pcl_omps --repeat 11 --json bench.json\n"
+        "  planeslam bench detect --methods grid,pcl_omps --repeat 11 --json bench.json\n"
         "  planeslam bench detect depth/1341836537.655691.png --repeat 1\n"
         "  planeslam bench detect --quality --json quality.json --plot plots/");
 
