@@ -1,11 +1,15 @@
 #include "bench_odometry.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <iostream>
+#include <memory>
 #include <nlohmann/json.hpp>
+#include <optional>
+#include <utility>
+#include <vector>
 
 #include "bench_common.hpp"
 #include "cli_common.hpp"
@@ -111,107 +115,153 @@ ds::RpeResult Rpe(const ds::Trajectory& gt, const ds::Trajectory& est, int delta
   return ds::EvaluateRpe(gt, est, o, "ground truth", "estimate");
 }
 
-}  // namespace
+/// Our odometry: the detector and registration::PlaneOdometry (frame-to-frame plane association
+/// and registration with the constant-velocity prior, point-to-plane fill of degenerate
+/// directions).
+struct PlaneMethod {
+  registration::PlaneOdometryConfig config;
+  std::unique_ptr<detection::PlaneDetector> detector;
+};
 
-int RunOdometryBench(const std::string& sequence_path, const Config& config,
-                     const OdometryOptions& options) {
-  const auto sequence = ds::OpenSequence(sequence_path, config.Get<ds::SensorConfig>("sensor"));
-  std::size_t n = sequence->Size();
-  if (options.max_frames > 0) n = std::min<std::size_t>(n, options.max_frames);
-  if (n < 2) throw IoError(sequence_path, "odometry needs at least two frames");
-
-  // Ours: detector + registration::PlaneOdometry (frame-to-frame plane association and
-  // registration with the constant-velocity prior, point-to-plane fill of degenerate directions).
+PlaneMethod MakePlaneMethod(const Config& config, const OdometryOptions& options) {
+  PlaneMethod ours;
   const std::string method =
       options.method.empty() ? config.Get<DetectionSection>("detection").method : options.method;
-  const registration::PlaneOdometryConfig odometry_config = OdometryConfigFrom(config);
-  const std::unique_ptr<detection::PlaneDetector> detector =
-      MakeDetector(method, config, odometry_config.decimation);
-  const std::optional<Pose> first_gt = sequence->GroundTruth(0);
-  const Pose T_world_first = first_gt ? *first_gt : Pose::Identity();
-  registration::PlaneOdometry odometry(odometry_config, T_world_first);
+  ours.config = OdometryConfigFrom(config);
+  ours.detector = MakeDetector(method, config, ours.config.decimation);
+  return ours;
+}
 
-  OdometryRun ours;
-  DegeneracyReport degeneracy;
-  ours.name = "planes(" + detector->Name() + ")";
 #ifdef PLANESLAM_HAVE_PCL_BASELINES
+pcl_baselines::GicpConfig GicpConfigFrom(const OdometryOptions& options) {
   pcl_baselines::GicpConfig gicp_config;
   gicp_config.voxel_size = options.gicp_voxel;
   gicp_config.max_correspondence_distance = options.gicp_max_distance;
-  pcl_baselines::GicpOdometry gicp(gicp_config);
+  return gicp_config;
+}
+#endif
+
+/// Every method's run over the sequence, and the frames' own ground-truth poses.
+struct BenchRuns {
+  OdometryRun ours;
+  DegeneracyReport degeneracy;  ///< of ours
+#ifdef PLANESLAM_HAVE_PCL_BASELINES
   OdometryRun pcl;
-  pcl.name = "pcl_gicp";
+#endif
+  ds::Trajectory ground_truth;
+
+  /// Ours first, then the baseline when built.
+  std::vector<OdometryRun*> All() {
+    std::vector<OdometryRun*> runs = {&ours};
+#ifdef PLANESLAM_HAVE_PCL_BASELINES
+    runs.push_back(&pcl);
+#endif
+    return runs;
+  }
+  std::vector<const OdometryRun*> All() const {
+    std::vector<const OdometryRun*> runs = {&ours};
+#ifdef PLANESLAM_HAVE_PCL_BASELINES
+    runs.push_back(&pcl);
+#endif
+    return runs;
+  }
+};
+
+/// Feeds the first `n` frames to every method, timing each. Returns false when interrupted.
+bool TrackSequence(const ds::Sequence& sequence, std::size_t n, const PlaneMethod& method,
+                   const OdometryOptions& options, BenchRuns* runs) {
+  const std::optional<Pose> first_gt = sequence.GroundTruth(0);
+  const Pose T_world_first = first_gt ? *first_gt : Pose::Identity();
+  registration::PlaneOdometry odometry(method.config, T_world_first);
+  runs->ours.name = "planes(" + method.detector->Name() + ")";
+#ifdef PLANESLAM_HAVE_PCL_BASELINES
+  pcl_baselines::GicpOdometry gicp(GicpConfigFrom(options));
+  runs->pcl.name = "pcl_gicp";
   Pose T_world_gicp = T_world_first;
 #endif
 
-  ds::Trajectory ground_truth;
   ProgressBar progress("bench odometry", n, options.quiet);
   for (std::size_t i = 0; i < n; ++i) {
-    if (StopRequested()) return 130;
-    const ds::Frame frame = sequence->Load(i);
-    if (frame.T_world_sensor_gt) ground_truth.Add(frame.timestamp, *frame.T_world_sensor_gt);
+    if (StopRequested()) return false;
+    const ds::Frame frame = sequence.Load(i);
+    if (frame.T_world_sensor_gt) runs->ground_truth.Add(frame.timestamp, *frame.T_world_sensor_gt);
 
     const Pose T_world_prev = odometry.T_world_sensor();
     auto t = Clock::now();
     const registration::OdometryStep step_ours =
-        odometry.Track(frame.timestamp, frame.cloud, *detector);
+        odometry.Track(frame.timestamp, frame.cloud, *method.detector);
     const double ours_ms = MsSince(t);
-    degeneracy.Add(step_ours, T_world_prev);
-    ours.trajectory.Add(frame.timestamp, step_ours.T_world_sensor);
+    runs->degeneracy.Add(step_ours, T_world_prev);
+    runs->ours.trajectory.Add(frame.timestamp, step_ours.T_world_sensor);
     if (i > 0) {
-      ours.times_ms.push_back(ours_ms);
-      if (!step_ours.registration.converged) ++ours.failures;
+      runs->ours.times_ms.push_back(ours_ms);
+      if (!step_ours.registration.converged) ++runs->ours.failures;
     }
 #ifdef PLANESLAM_HAVE_PCL_BASELINES
     const pcl_baselines::GicpStep step = gicp.Track(frame.cloud);
     if (i > 0) {
       T_world_gicp = T_world_gicp * step.T_prev_curr;
-      pcl.times_ms.push_back(step.time_ms);
-      if (!step.converged) ++pcl.failures;
+      runs->pcl.times_ms.push_back(step.time_ms);
+      if (!step.converged) ++runs->pcl.failures;
     }
-    pcl.trajectory.Add(frame.timestamp, T_world_gicp);
+    runs->pcl.trajectory.Add(frame.timestamp, T_world_gicp);
 #endif
     progress.Update(i + 1);
   }
   progress.Finish();
+  return true;
+}
 
-  std::vector<OdometryRun*> runs = {&ours};
-#ifdef PLANESLAM_HAVE_PCL_BASELINES
-  runs.push_back(&pcl);
-#endif
-  // Delta 1 s in frames from the median frame interval (evo's RPE has no time unit); at that delta
-  // every pair is used (evo --all_pairs), as consecutive non-overlapping pairs would leave ~8.
+/// The median frame interval [s] of `trajectory` and the RPE delta of 1 s in frames (evo's RPE
+/// has no time unit).
+struct SecondInFrames {
+  double dt = 0.0;
+  int frames = 1;
+};
+
+SecondInFrames OneSecondDelta(const ds::Trajectory& trajectory) {
   std::vector<double> dts;
-  for (std::size_t i = 1; i < ours.trajectory.size(); ++i) {
-    dts.push_back(ours.trajectory.stamps[i] - ours.trajectory.stamps[i - 1]);
+  for (std::size_t i = 1; i < trajectory.size(); ++i) {
+    dts.push_back(trajectory.stamps[i] - trajectory.stamps[i - 1]);
   }
-  const double dt = Median(dts);
-  const int second_frames = std::max(1, static_cast<int>(std::lround(1.0 / dt)));
+  SecondInFrames second;
+  second.dt = Median(dts);
+  second.frames = std::max(1, static_cast<int>(std::lround(1.0 / second.dt)));
+  return second;
+}
 
-  // Prefer the full ground-truth file (mocap rate) over the per-frame associated poses.
-  ds::Trajectory reference = ground_truth;
+/// RPE at delta 1 frame (consecutive pairs) and 1 s (every pair, evo --all_pairs, as consecutive
+/// non-overlapping pairs would leave ~8) against the full ground-truth file (mocap rate) when the
+/// sequence has one, else against the frames' own poses.
+void EvaluateRuns(const std::string& sequence_path, int second_frames, BenchRuns* runs) {
+  ds::Trajectory reference = runs->ground_truth;
   const fs::path gt_file = fs::path(sequence_path) / "groundtruth.txt";
   if (fs::is_regular_file(gt_file)) reference = ds::ReadTumTrajectory(gt_file.string());
-  const bool have_gt = reference.size() >= 2 && ground_truth.size() >= 2;
-  if (have_gt) {
-    for (OdometryRun* run : runs) {
-      run->rpe_frame = Rpe(reference, run->trajectory, 1, false);
-      run->rpe_second = Rpe(reference, run->trajectory, second_frames, true);
-      run->evaluated = true;
-    }
+  if (reference.size() < 2 || runs->ground_truth.size() < 2) return;
+  for (OdometryRun* run : runs->All()) {
+    run->rpe_frame = Rpe(reference, run->trajectory, 1, false);
+    run->rpe_second = Rpe(reference, run->trajectory, second_frames, true);
+    run->evaluated = true;
   }
+}
 
+void PrintSetup(const std::string& sequence_path, std::size_t n, const SecondInFrames& second,
+                const PlaneMethod& method, [[maybe_unused]] const OdometryOptions& options) {
   std::printf("bench odometry: %s, %zu frames, delta 1 s = %d frames (median dt %.4f s)\n",
-              sequence_path.c_str(), n, second_frames, dt);
+              sequence_path.c_str(), n, second.frames, second.dt);
   std::printf(
       "ours: detector %s at 1/%d resolution + PlaneOdometry (frame to frame, constant-velocity "
       "prior)\n",
-      detector->Name().c_str(), odometry_config.decimation);
+      method.detector->Name().c_str(), method.config.decimation);
 #ifdef PLANESLAM_HAVE_PCL_BASELINES
+  const pcl_baselines::GicpConfig gicp_config = GicpConfigFrom(options);
   std::printf("pcl_gicp: VoxelGrid %.3f m, max correspondence %.3f m, k=%d, %d iterations\n",
               gicp_config.voxel_size, gicp_config.max_correspondence_distance,
               gicp_config.correspondence_randomness, gicp_config.max_iterations);
 #endif
+}
+
+void PrintTable(const std::vector<const OdometryRun*>& runs) {
   std::printf("\n%-16s %10s %9s %14s %14s %14s %14s\n", "method", "ms/frame", "failures",
               "RPE1f t rmse", "RPE1f r rmse", "RPE1s t rmse", "RPE1s r rmse");
   for (const OdometryRun* run : runs) {
@@ -225,6 +275,9 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
                   Median(run->times_ms), run->failures, "-", "-", "-", "-");
     }
   }
+}
+
+void PrintDegeneracy(const OdometryRun& ours, const DegeneracyReport& degeneracy, std::size_t n) {
   std::printf(
       "\n%s: degenerate on %d of %zu frames (%d filled by point-to-plane alignment, %d "
       "from the prior)",
@@ -235,18 +288,25 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
                 axis.y(), axis.z());
   }
   std::printf("\n");
-  const bool have_drift = ground_truth.size() >= 2;
-  if (have_drift) {
-    for (OdometryRun* run : runs) run->drift = DriftOverRun(ground_truth, run->trajectory);
-    std::printf(
-        "drift from the first to the last frame with ground truth (relative pose error in world "
-        "axes x y z [cm]) over %.2f m of path:\n",
-        ours.drift.path_length);
-    for (const OdometryRun* run : runs) {
-      const Eigen::Vector3d e = 100.0 * run->drift.error;
-      std::printf("  %-16s %8.2f %8.2f %8.2f\n", run->name.c_str(), e.x(), e.y(), e.z());
-    }
+}
+
+/// Sets every run's drift and prints it; false (nothing printed) without two ground-truth frames.
+bool DriftOfRuns(BenchRuns* runs) {
+  if (runs->ground_truth.size() < 2) return false;
+  for (OdometryRun* run : runs->All())
+    run->drift = DriftOverRun(runs->ground_truth, run->trajectory);
+  std::printf(
+      "drift from the first to the last frame with ground truth (relative pose error in world "
+      "axes x y z [cm]) over %.2f m of path:\n",
+      runs->ours.drift.path_length);
+  for (const OdometryRun* run : runs->All()) {
+    const Eigen::Vector3d e = 100.0 * run->drift.error;
+    std::printf("  %-16s %8.2f %8.2f %8.2f\n", run->name.c_str(), e.x(), e.y(), e.z());
   }
+  return true;
+}
+
+void PrintFooter(const std::vector<const OdometryRun*>& runs) {
   if (runs.size() == 2) {
     std::printf("\nspeed ratio (median ms pcl_gicp / ours): %.1fx\n",
                 Median(runs[1]->times_ms) / Median(runs[0]->times_ms));
@@ -255,43 +315,72 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
       "\nms/frame: median; ours = decimation + detection + PlaneOdometry, GICP = voxel grid + "
       "covariances + alignment.\nRPE with evo's semantics (E = inv(Q_i^-1 Q_j)(P_i^-1 P_j), "
       "association within 10 ms), translation and rotation rmse.\n");
+}
 
-  if (!options.out_dir.empty()) {
-    EnsureDirectory(options.out_dir);
-    ds::WriteTumTrajectory(options.out_dir + "/planes.txt", ours.trajectory);
+void WriteTrajectories(const std::string& out_dir, const BenchRuns& runs) {
+  EnsureDirectory(out_dir);
+  ds::WriteTumTrajectory(out_dir + "/planes.txt", runs.ours.trajectory);
 #ifdef PLANESLAM_HAVE_PCL_BASELINES
-    ds::WriteTumTrajectory(options.out_dir + "/gicp.txt", pcl.trajectory);
+  ds::WriteTumTrajectory(out_dir + "/gicp.txt", runs.pcl.trajectory);
 #endif
-  }
-  if (!options.json_path.empty()) {
-    nlohmann::json out = nlohmann::json::array();
-    for (const OdometryRun* run : runs) {
-      nlohmann::json j = {{"method", run->name},
-                          {"frames", n},
-                          {"median_ms", Median(run->times_ms)},
-                          {"failures", run->failures}};
-      if (run->evaluated) {
-        j["rpe_1_frame"] = {{"trans_rmse_m", run->rpe_frame.trans_stats.rmse},
-                            {"rot_rmse_deg", run->rpe_frame.rot_stats_deg.rmse},
-                            {"pairs", run->rpe_frame.trans_stats.count}};
-        j["rpe_1_s"] = {{"delta_frames", second_frames},
-                        {"trans_rmse_m", run->rpe_second.trans_stats.rmse},
-                        {"rot_rmse_deg", run->rpe_second.rot_stats_deg.rmse},
-                        {"pairs", run->rpe_second.trans_stats.count}};
-      }
-      if (have_drift) {
-        j["drift_world_m"] = {run->drift.error.x(), run->drift.error.y(), run->drift.error.z()};
-        j["path_length_m"] = run->drift.path_length;
-      }
-      if (run == &ours) {
-        j["decimation"] = odometry_config.decimation;
-        j["degenerate_frames"] = degeneracy.frames;
-        j["filled_by_point_to_plane"] = degeneracy.filled_icp;
-        j["filled_from_prior"] = degeneracy.filled_prior;
-      }
-      out.push_back(std::move(j));
+}
+
+void WriteJson(const std::string& path, std::size_t n, int second_frames, bool have_drift,
+               int decimation, const BenchRuns& runs) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const OdometryRun* run : runs.All()) {
+    nlohmann::json j = {{"method", run->name},
+                        {"frames", n},
+                        {"median_ms", Median(run->times_ms)},
+                        {"failures", run->failures}};
+    if (run->evaluated) {
+      j["rpe_1_frame"] = {{"trans_rmse_m", run->rpe_frame.trans_stats.rmse},
+                          {"rot_rmse_deg", run->rpe_frame.rot_stats_deg.rmse},
+                          {"pairs", run->rpe_frame.trans_stats.count}};
+      j["rpe_1_s"] = {{"delta_frames", second_frames},
+                      {"trans_rmse_m", run->rpe_second.trans_stats.rmse},
+                      {"rot_rmse_deg", run->rpe_second.rot_stats_deg.rmse},
+                      {"pairs", run->rpe_second.trans_stats.count}};
     }
-    ds::WriteFileAtomic(options.json_path, out.dump(2) + "\n");
+    if (have_drift) {
+      j["drift_world_m"] = {run->drift.error.x(), run->drift.error.y(), run->drift.error.z()};
+      j["path_length_m"] = run->drift.path_length;
+    }
+    if (run == &runs.ours) {
+      j["decimation"] = decimation;
+      j["degenerate_frames"] = runs.degeneracy.frames;
+      j["filled_by_point_to_plane"] = runs.degeneracy.filled_icp;
+      j["filled_from_prior"] = runs.degeneracy.filled_prior;
+    }
+    out.push_back(std::move(j));
+  }
+  ds::WriteFileAtomic(path, out.dump(2) + "\n");
+}
+
+}  // namespace
+
+int RunOdometryBench(const std::string& sequence_path, const Config& config,
+                     const OdometryOptions& options) {
+  const auto sequence = ds::OpenSequence(sequence_path, config.Get<ds::SensorConfig>("sensor"));
+  std::size_t n = sequence->Size();
+  if (options.max_frames > 0) n = std::min<std::size_t>(n, options.max_frames);
+  if (n < 2) throw IoError(sequence_path, "odometry needs at least two frames");
+  const PlaneMethod ours = MakePlaneMethod(config, options);
+
+  BenchRuns runs;
+  if (!TrackSequence(*sequence, n, ours, options, &runs)) return 130;
+  const SecondInFrames second = OneSecondDelta(runs.ours.trajectory);
+  EvaluateRuns(sequence_path, second.frames, &runs);
+
+  PrintSetup(sequence_path, n, second, ours, options);
+  PrintTable(std::as_const(runs).All());
+  PrintDegeneracy(runs.ours, runs.degeneracy, n);
+  const bool have_drift = DriftOfRuns(&runs);
+  PrintFooter(std::as_const(runs).All());
+
+  if (!options.out_dir.empty()) WriteTrajectories(options.out_dir, runs);
+  if (!options.json_path.empty()) {
+    WriteJson(options.json_path, n, second.frames, have_drift, ours.config.decimation, runs);
   }
   return 0;
 }

@@ -12,7 +12,8 @@ namespace planeslam::app {
 
 void AddConfigOptions(CLI::App& sub, ConfigOptions& options) {
   sub.add_option("-c,--config", options.config_files,
-                 "YAML config file(s) applied over the defaults (see config/default.yaml)")
+                 "YAML config file(s) applied over the defaults (see config/basic.yaml and "
+                 "config/reference.yaml)")
       ->type_name("FILE");
   sub.add_option("--set", options.overrides, "Override one key, e.g. --set grid.cell_size=4")
       ->type_name("SECTION.KEY=VALUE");

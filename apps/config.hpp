@@ -5,7 +5,8 @@
 /// apps/config_sections*.cpp) with a function that visits its fields: key, unit/doc comment and the
 /// allowed range. Loading a YAML file checks every key against the sections: an unknown key, a wrong
 /// type or an out-of-range value throws ConfigError naming the file, the key and the reason.
-/// ToYaml() dumps the effective configuration (with comments), which is what config/default.yaml holds.
+/// ToYaml() dumps the effective configuration with comments: config/reference.yaml is that dump
+/// of the defaults.
 #include <functional>
 #include <map>
 #include <memory>

@@ -33,9 +33,11 @@ void VisitSensor(FieldVisitor& v, ds::SensorConfig& c) {
   v.Field("gt_max_time_difference", c.gt_max_time_difference,
           "largest frame/ground-truth stamp difference to associate a pose (TUM tools: 0.02) [s]",
           0.0, 1e6);
-  v.Field("lidar_rows", c.lidar_rows, "LiDAR range image rows (lasers; HDL-64E: 64)", 1, 65535);
+  v.Field("lidar_rows", c.lidar_rows, "LiDAR range image rows, one per laser [rows] (HDL-64E: 64)",
+          1, 65535);
   v.Field("lidar_cols", c.lidar_cols,
-          "LiDAR range image columns (HDL-64E at 10 Hz fires ~2083 times a turn)", 1, 65535);
+          "LiDAR range image columns, firings per turn [columns] (HDL-64E at 10 Hz: 2083)", 1,
+          65535);
   v.Field("lidar_row_mode", c.lidar_row_mode,
           "scan_order: row = laser ring from KITTI's point order (falls back to elevation when "
           "the ring count is not lidar_rows); elevation: uniform elevation bins",
@@ -64,8 +66,8 @@ void VisitLimits(FieldVisitor& v, LimitsConfig& c) {
   v.Field("max_points", c.max_points, "largest unorganized scan (KITTI .bin) [points]", 1,
           2147483647);
   v.Field("max_side", c.max_side, "largest image width or height [px]", 1, 2147483647);
-  v.Field("max_lines", c.max_lines, "most lines in a text input (trajectories, frame lists)", 1,
-          2147483647);
+  v.Field("max_lines", c.max_lines,
+          "most lines in a text input (trajectories, frame lists) [lines]", 1, 2147483647);
 }
 
 PLANESLAM_REGISTER_CONFIG_SECTION(LimitsConfig, "limits",

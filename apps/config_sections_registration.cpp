@@ -126,7 +126,7 @@ void VisitOdometry(FieldVisitor& v, registration::PlaneOdometryConfig& c) {
           "narrow plane is uncertain by this over its width (registration; SLAM tracking uses 0)",
           0.0, 1.0);
   v.Field("decimation", c.decimation,
-          "detect and register planes on every n-th row and column (1 = full resolution; "
+          "[px] detect and register planes on every n-th row and column (1 = full resolution; "
           "Kinect-class depth: 2)",
           1, 16);
 }

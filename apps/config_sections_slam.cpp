@@ -78,8 +78,8 @@ void VisitRun(FieldVisitor& v, RunConfig& c) {
           100000000);
   v.Field("frame_stride", c.frame_stride, "[frames] use every n-th frame", 1, 1000);
   v.Field("decimation", c.decimation,
-          "detect and track on every n-th row and column (1 = full resolution; Kinect-class "
-          "depth: 2)",
+          "[px] detect and track on every n-th row and column (1 = full resolution; "
+          "Kinect-class depth: 2)",
           1, 16);
   v.Field("ate_max_time_difference", c.ate_max_time_difference,
           "[s] evo's association window when scoring against ground truth", 0.0, 10.0);

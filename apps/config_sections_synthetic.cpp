@@ -13,14 +13,14 @@ namespace ds = planeslam::datasets;
 void VisitSimulation(FieldVisitor& v, SimulationConfig& c) {
   v.Field("scene", c.scene, "synthetic world: room (office), corridor (degenerate), rubble",
           {"room", "corridor", "rubble"});
-  v.Field("seed", c.seed, "seed of the rubble layout and the sensor noise", 0, 2147483647);
+  v.Field("seed", c.seed, "seed of the rubble layout and the sensor noise [-]", 0, 2147483647);
   v.Field("sensor", c.sensor, "pinhole depth camera or spherical scanner", {"pinhole", "spherical"});
   v.Field("noise", c.noise, "sensor noise on (false: exact ranges)");
-  v.Field("frames", c.frames, "number of frames; 0 = the scene's whole path", 0, 1000000);
+  v.Field("frames", c.frames, "number of frames [frames]; 0 = the scene's whole path", 0, 1000000);
   v.Field("rate", c.rate, "frame rate [Hz]", 0.1, 1000.0);
   v.Field("speed", c.speed, "camera speed along the path [m/s]; 0 = scene default", 0.0, 100.0);
-  v.Field("laps", c.laps, "room/rubble: turns around the centre when frames = 0; 0 = default",
-          0.0, 100.0);
+  v.Field("laps", c.laps,
+          "room/rubble: turns around the centre when frames = 0 [turns]; 0 = default", 0.0, 100.0);
   v.Field("length", c.length, "corridor: run length when frames = 0 [m]; 0 = default (10 m)",
           0.0, 25.0);
 }

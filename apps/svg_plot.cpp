@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <ostream>
 #include <sstream>
 
 #include "planeslam/datasets/atomic_file.hpp"
@@ -198,11 +199,22 @@ void SvgPlot::AddBoxes(const std::vector<BoxStats>& boxes, SvgColor color) {
   box_color_ = color;
 }
 
-std::string SvgPlot::Render() const {
-  // Layout: margins for tick labels and axis labels; a strip on the right for the colour bar.
-  const double left = 80, top = 40, bottom = 60;
-  const double right = has_colorbar_ ? 110 : 25;
-  double pw = width_ - left - right, ph = height_ - top - bottom;
+/// The plot area [px] and the data ranges it shows; maps data coordinates to pixels.
+struct SvgPlot::Layout {
+  double left = 80, top = 40, bottom = 60, right = 25;  ///< margins [px]
+  double pw = 0, ph = 0;                                ///< plot area [px]
+  double x_lo = 0, x_hi = 1, y_lo = 0, y_hi = 1;        ///< data ranges shown
+  double sx = 1, sy = 1;                                ///< scale [px per data unit]
+  double X(double x) const { return left + (x - x_lo) * sx; }
+  double Y(double y) const { return top + ph - (y - y_lo) * sy; }
+};
+
+SvgPlot::Layout SvgPlot::ComputeLayout() const {
+  // Margins for tick labels and axis labels; a strip on the right for the colour bar.
+  Layout l;
+  l.right = has_colorbar_ ? 110 : 25;
+  l.pw = width_ - l.left - l.right;
+  l.ph = height_ - l.top - l.bottom;
 
   Range xr, yr;
   for (const Series& s : series_) {
@@ -225,27 +237,33 @@ std::string SvgPlot::Render() const {
   }
   if (boxes_.empty()) xr.Pad(0.03);
   yr.Pad(0.05);
-  double sx = pw / (xr.hi - xr.lo), sy = ph / (yr.hi - yr.lo);
+  double sx = l.pw / (xr.hi - xr.lo), sy = l.ph / (yr.hi - yr.lo);
   if (equal_aspect_) {  // widen the tighter axis around its centre
     const double s = std::min(sx, sy);
     const double cx = 0.5 * (xr.lo + xr.hi), cy = 0.5 * (yr.lo + yr.hi);
-    xr.lo = cx - 0.5 * pw / s;
-    xr.hi = cx + 0.5 * pw / s;
-    yr.lo = cy - 0.5 * ph / s;
-    yr.hi = cy + 0.5 * ph / s;
+    xr.lo = cx - 0.5 * l.pw / s;
+    xr.hi = cx + 0.5 * l.pw / s;
+    yr.lo = cy - 0.5 * l.ph / s;
+    yr.hi = cy + 0.5 * l.ph / s;
     sx = sy = s;
   }
-  auto px = [&](double x) { return left + (x - xr.lo) * sx; };
-  auto py = [&](double y) { return top + ph - (y - yr.lo) * sy; };
+  l.x_lo = xr.lo;
+  l.x_hi = xr.hi;
+  l.y_lo = yr.lo;
+  l.y_hi = yr.hi;
+  l.sx = sx;
+  l.sy = sy;
+  return l;
+}
 
-  std::ostringstream o;
+void SvgPlot::RenderHeader(std::ostream& o, const Layout& l) const {
   o << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
     << "<svg xmlns=\"http://www.w3.org/2000/svg\" version=\"1.1\" width=\"" << width_
     << "\" height=\"" << height_ << "\" viewBox=\"0 0 " << width_ << ' ' << height_
     << "\" font-family=\"Helvetica, Arial, sans-serif\" font-size=\"12\">\n";
   o << "<title>" << XmlEscape(title_) << "</title>\n";
-  o << "<defs>\n<clipPath id=\"plot-area\"><rect x=\"" << Num(left) << "\" y=\"" << Num(top)
-    << "\" width=\"" << Num(pw) << "\" height=\"" << Num(ph) << "\"/></clipPath>\n";
+  o << "<defs>\n<clipPath id=\"plot-area\"><rect x=\"" << Num(l.left) << "\" y=\"" << Num(l.top)
+    << "\" width=\"" << Num(l.pw) << "\" height=\"" << Num(l.ph) << "\"/></clipPath>\n";
   if (has_colorbar_) {
     o << "<linearGradient id=\"colorbar\" x1=\"0\" y1=\"1\" x2=\"0\" y2=\"0\">\n";
     for (int k = 0; k <= 8; ++k) {
@@ -256,159 +274,188 @@ std::string SvgPlot::Render() const {
   }
   o << "</defs>\n";
   o << "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
+}
 
-  // Grid and ticks.
+void SvgPlot::RenderGrid(std::ostream& o, const Layout& l) const {
   o << "<g stroke=\"#e0e0e0\" stroke-width=\"1\">\n";
-  const double xstep = NiceStep(xr.hi - xr.lo, 8), ystep = NiceStep(yr.hi - yr.lo, 6);
+  const double xstep = NiceStep(l.x_hi - l.x_lo, 8), ystep = NiceStep(l.y_hi - l.y_lo, 6);
   std::ostringstream labels;
   if (boxes_.empty()) {
-    for (double x = std::ceil(xr.lo / xstep) * xstep; x <= xr.hi + 1e-9 * xstep; x += xstep) {
-      o << "<line x1=\"" << Num(px(x)) << "\" y1=\"" << Num(top) << "\" x2=\"" << Num(px(x))
-        << "\" y2=\"" << Num(top + ph) << "\"/>\n";
-      labels << "<text x=\"" << Num(px(x)) << "\" y=\"" << Num(top + ph + 16)
+    for (double x = std::ceil(l.x_lo / xstep) * xstep; x <= l.x_hi + 1e-9 * xstep; x += xstep) {
+      o << "<line x1=\"" << Num(l.X(x)) << "\" y1=\"" << Num(l.top) << "\" x2=\"" << Num(l.X(x))
+        << "\" y2=\"" << Num(l.top + l.ph) << "\"/>\n";
+      labels << "<text x=\"" << Num(l.X(x)) << "\" y=\"" << Num(l.top + l.ph + 16)
              << "\" text-anchor=\"middle\">" << TickLabel(x, xstep) << "</text>\n";
     }
   } else {
     for (std::size_t i = 0; i < boxes_.size(); ++i) {
-      labels << "<text x=\"" << Num(px(static_cast<double>(i) + 1.0)) << "\" y=\""
-             << Num(top + ph + 16) << "\" text-anchor=\"middle\">" << XmlEscape(boxes_[i].label)
+      labels << "<text x=\"" << Num(l.X(static_cast<double>(i) + 1.0)) << "\" y=\""
+             << Num(l.top + l.ph + 16) << "\" text-anchor=\"middle\">" << XmlEscape(boxes_[i].label)
              << "</text>\n";
     }
   }
-  for (double y = std::ceil(yr.lo / ystep) * ystep; y <= yr.hi + 1e-9 * ystep; y += ystep) {
-    o << "<line x1=\"" << Num(left) << "\" y1=\"" << Num(py(y)) << "\" x2=\"" << Num(left + pw)
-      << "\" y2=\"" << Num(py(y)) << "\"/>\n";
-    labels << "<text x=\"" << Num(left - 6) << "\" y=\"" << Num(py(y) + 4)
+  for (double y = std::ceil(l.y_lo / ystep) * ystep; y <= l.y_hi + 1e-9 * ystep; y += ystep) {
+    o << "<line x1=\"" << Num(l.left) << "\" y1=\"" << Num(l.Y(y)) << "\" x2=\""
+      << Num(l.left + l.pw) << "\" y2=\"" << Num(l.Y(y)) << "\"/>\n";
+    labels << "<text x=\"" << Num(l.left - 6) << "\" y=\"" << Num(l.Y(y) + 4)
            << "\" text-anchor=\"end\">" << TickLabel(y, ystep) << "</text>\n";
   }
   o << "</g>\n<g fill=\"#333333\">\n" << labels.str() << "</g>\n";
+}
 
-  // Data.
-  o << "<g clip-path=\"url(#plot-area)\">\n";
+void SvgPlot::RenderBoxes(std::ostream& o, const Layout& l) const {
   for (std::size_t i = 0; i < boxes_.size(); ++i) {
     const BoxStats& b = boxes_[i];
-    const double c = px(static_cast<double>(i) + 1.0), hw = 0.25 * sx;
+    const double c = l.X(static_cast<double>(i) + 1.0), hw = 0.25 * l.sx;
     const std::string color = box_color_.Hex();
     o << "<g stroke=\"" << color << "\" stroke-width=\"1.5\" fill=\"none\">\n";
-    o << "<line x1=\"" << Num(c) << "\" y1=\"" << Num(py(b.min)) << "\" x2=\"" << Num(c)
-      << "\" y2=\"" << Num(py(b.q1)) << "\"/>\n";
-    o << "<line x1=\"" << Num(c) << "\" y1=\"" << Num(py(b.q3)) << "\" x2=\"" << Num(c)
-      << "\" y2=\"" << Num(py(b.max)) << "\"/>\n";
-    o << "<line x1=\"" << Num(c - 0.5 * hw) << "\" y1=\"" << Num(py(b.min)) << "\" x2=\""
-      << Num(c + 0.5 * hw) << "\" y2=\"" << Num(py(b.min)) << "\"/>\n";
-    o << "<line x1=\"" << Num(c - 0.5 * hw) << "\" y1=\"" << Num(py(b.max)) << "\" x2=\""
-      << Num(c + 0.5 * hw) << "\" y2=\"" << Num(py(b.max)) << "\"/>\n";
-    o << "<rect x=\"" << Num(c - hw) << "\" y=\"" << Num(py(b.q3)) << "\" width=\"" << Num(2 * hw)
-      << "\" height=\"" << Num(std::max(0.0, py(b.q1) - py(b.q3))) << "\" fill=\"" << color
+    o << "<line x1=\"" << Num(c) << "\" y1=\"" << Num(l.Y(b.min)) << "\" x2=\"" << Num(c)
+      << "\" y2=\"" << Num(l.Y(b.q1)) << "\"/>\n";
+    o << "<line x1=\"" << Num(c) << "\" y1=\"" << Num(l.Y(b.q3)) << "\" x2=\"" << Num(c)
+      << "\" y2=\"" << Num(l.Y(b.max)) << "\"/>\n";
+    o << "<line x1=\"" << Num(c - 0.5 * hw) << "\" y1=\"" << Num(l.Y(b.min)) << "\" x2=\""
+      << Num(c + 0.5 * hw) << "\" y2=\"" << Num(l.Y(b.min)) << "\"/>\n";
+    o << "<line x1=\"" << Num(c - 0.5 * hw) << "\" y1=\"" << Num(l.Y(b.max)) << "\" x2=\""
+      << Num(c + 0.5 * hw) << "\" y2=\"" << Num(l.Y(b.max)) << "\"/>\n";
+    o << "<rect x=\"" << Num(c - hw) << "\" y=\"" << Num(l.Y(b.q3)) << "\" width=\"" << Num(2 * hw)
+      << "\" height=\"" << Num(std::max(0.0, l.Y(b.q1) - l.Y(b.q3))) << "\" fill=\"" << color
       << "\" fill-opacity=\"0.25\"/>\n";
-    o << "<line x1=\"" << Num(c - hw) << "\" y1=\"" << Num(py(b.median)) << "\" x2=\""
-      << Num(c + hw) << "\" y2=\"" << Num(py(b.median)) << "\" stroke-width=\"2.5\"/>\n";
+    o << "<line x1=\"" << Num(c - hw) << "\" y1=\"" << Num(l.Y(b.median)) << "\" x2=\""
+      << Num(c + hw) << "\" y2=\"" << Num(l.Y(b.median)) << "\" stroke-width=\"2.5\"/>\n";
     o << "</g>\n";
   }
+}
+
+void SvgPlot::RenderLine(std::ostream& o, const Layout& l, const Series& s) {
+  const std::string dash = s.style.dashed ? " stroke-dasharray=\"6,4\"" : "";
+  // NaN points break the line: each finite run is one polyline.
+  std::ostringstream points;
+  auto flush = [&]() {
+    if (points.tellp() > 0) {
+      o << "<polyline fill=\"none\" stroke=\"" << s.style.color.Hex() << "\" stroke-width=\""
+        << Num(s.style.width) << "\" stroke-linejoin=\"round\"" << dash << " points=\""
+        << points.str() << "\"/>\n";
+    }
+    points.str("");
+    points.clear();
+  };
+  for (std::size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
+    if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i])) {
+      flush();
+      continue;
+    }
+    points << (points.tellp() > 0 ? " " : "") << Num(l.X(s.x[i])) << ',' << Num(l.Y(s.y[i]));
+  }
+  flush();
+}
+
+void SvgPlot::RenderPoints(std::ostream& o, const Layout& l, const Series& s) const {
+  for (std::size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
+    if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i])) continue;
+    const SvgColor c = s.kind == Series::Kind::kScatter
+                           ? s.style.color
+                           : ColorMap((s.values[i] - cmin_) / (cmax_ - cmin_));
+    o << "<circle cx=\"" << Num(l.X(s.x[i])) << "\" cy=\"" << Num(l.Y(s.y[i])) << "\" r=\""
+      << Num(s.radius) << "\" fill=\"" << c.Hex() << "\"/>\n";
+  }
+}
+
+void SvgPlot::RenderHorizontalLine(std::ostream& o, const Layout& l, const Series& s) {
+  const std::string dash = s.style.dashed ? " stroke-dasharray=\"6,4\"" : "";
+  o << "<line x1=\"" << Num(l.left) << "\" y1=\"" << Num(l.Y(s.y[0])) << "\" x2=\""
+    << Num(l.left + l.pw) << "\" y2=\"" << Num(l.Y(s.y[0])) << "\" stroke=\"" << s.style.color.Hex()
+    << "\" stroke-width=\"" << Num(s.style.width) << "\"" << dash << "/>\n";
+}
+
+void SvgPlot::RenderData(std::ostream& o, const Layout& l) const {
+  o << "<g clip-path=\"url(#plot-area)\">\n";
+  RenderBoxes(o, l);
   for (const Series& s : series_) {
-    const std::string dash = s.style.dashed ? " stroke-dasharray=\"6,4\"" : "";
     switch (s.kind) {
-      case Series::Kind::kLine: {
-        std::ostringstream points;
-        auto flush = [&]() {
-          if (points.tellp() > 0) {
-            o << "<polyline fill=\"none\" stroke=\"" << s.style.color.Hex() << "\" stroke-width=\""
-              << Num(s.style.width) << "\" stroke-linejoin=\"round\"" << dash << " points=\""
-              << points.str() << "\"/>\n";
-          }
-          points.str("");
-          points.clear();
-        };
-        for (std::size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
-          if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i])) {
-            flush();
-            continue;
-          }
-          points << (points.tellp() > 0 ? " " : "") << Num(px(s.x[i])) << ',' << Num(py(s.y[i]));
-        }
-        flush();
+      case Series::Kind::kLine:
+        RenderLine(o, l, s);
         break;
-      }
       case Series::Kind::kScatter:
       case Series::Kind::kColorScatter:
-        for (std::size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
-          if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i])) continue;
-          const SvgColor c = s.kind == Series::Kind::kScatter
-                                 ? s.style.color
-                                 : ColorMap((s.values[i] - cmin_) / (cmax_ - cmin_));
-          o << "<circle cx=\"" << Num(px(s.x[i])) << "\" cy=\"" << Num(py(s.y[i])) << "\" r=\""
-            << Num(s.radius) << "\" fill=\"" << c.Hex() << "\"/>\n";
-        }
+        RenderPoints(o, l, s);
         break;
       case Series::Kind::kHLine:
-        o << "<line x1=\"" << Num(left) << "\" y1=\"" << Num(py(s.y[0])) << "\" x2=\""
-          << Num(left + pw) << "\" y2=\"" << Num(py(s.y[0])) << "\" stroke=\""
-          << s.style.color.Hex() << "\" stroke-width=\"" << Num(s.style.width) << "\"" << dash
-          << "/>\n";
+        RenderHorizontalLine(o, l, s);
         break;
     }
   }
   o << "</g>\n";
+}
 
-  // Frame, title, axis labels.
-  o << "<rect x=\"" << Num(left) << "\" y=\"" << Num(top) << "\" width=\"" << Num(pw)
-    << "\" height=\"" << Num(ph) << "\" fill=\"none\" stroke=\"#333333\"/>\n";
-  o << "<text x=\"" << Num(left + pw / 2) << "\" y=\"24\" text-anchor=\"middle\" font-size=\"15\">"
-    << XmlEscape(title_) << "</text>\n";
-  o << "<text x=\"" << Num(left + pw / 2) << "\" y=\"" << Num(height_ - 18)
+void SvgPlot::RenderFrameAndLabels(std::ostream& o, const Layout& l) const {
+  o << "<rect x=\"" << Num(l.left) << "\" y=\"" << Num(l.top) << "\" width=\"" << Num(l.pw)
+    << "\" height=\"" << Num(l.ph) << "\" fill=\"none\" stroke=\"#333333\"/>\n";
+  o << "<text x=\"" << Num(l.left + l.pw / 2)
+    << "\" y=\"24\" text-anchor=\"middle\" font-size=\"15\">" << XmlEscape(title_) << "</text>\n";
+  o << "<text x=\"" << Num(l.left + l.pw / 2) << "\" y=\"" << Num(height_ - 18)
     << "\" text-anchor=\"middle\" font-size=\"13\">" << XmlEscape(x_label_) << "</text>\n";
-  o << "<text transform=\"translate(18," << Num(top + ph / 2)
+  o << "<text transform=\"translate(18," << Num(l.top + l.ph / 2)
     << ") rotate(-90)\" text-anchor=\"middle\" font-size=\"13\">" << XmlEscape(y_label_)
     << "</text>\n";
+}
 
-  // Legend (top right, inside the plot).
+void SvgPlot::RenderLegend(std::ostream& o, const Layout& l) const {
+  // Top right, inside the plot; one entry per series with a legend text.
   std::vector<const Series*> entries;
   for (const Series& s : series_) {
     if (!s.legend.empty()) entries.push_back(&s);
   }
-  if (!entries.empty()) {
-    std::size_t longest = 0;
-    for (const Series* s : entries) longest = std::max(longest, s->legend.size());
-    const double w = 40 + 6.5 * static_cast<double>(longest), h = 8 + 18.0 * entries.size();
-    const double x0 = left + pw - w - 8, y0 = top + 8;
-    o << "<g>\n<rect x=\"" << Num(x0) << "\" y=\"" << Num(y0) << "\" width=\"" << Num(w)
-      << "\" height=\"" << Num(h)
-      << "\" fill=\"white\" fill-opacity=\"0.85\" stroke=\"#999999\"/>\n";
-    for (std::size_t k = 0; k < entries.size(); ++k) {
-      const Series& s = *entries[k];
-      const double y = y0 + 15 + 18.0 * k;
-      if (s.kind == Series::Kind::kScatter) {
-        o << "<circle cx=\"" << Num(x0 + 17) << "\" cy=\"" << Num(y - 4) << "\" r=\"3.5\" fill=\""
-          << s.style.color.Hex() << "\"/>\n";
-      } else {
-        o << "<line x1=\"" << Num(x0 + 6) << "\" y1=\"" << Num(y - 4) << "\" x2=\"" << Num(x0 + 28)
-          << "\" y2=\"" << Num(y - 4) << "\" stroke=\"" << s.style.color.Hex()
-          << "\" stroke-width=\"" << Num(s.style.width) << "\""
-          << (s.style.dashed ? " stroke-dasharray=\"6,4\"" : "") << "/>\n";
-      }
-      o << "<text x=\"" << Num(x0 + 34) << "\" y=\"" << Num(y) << "\">" << XmlEscape(s.legend)
-        << "</text>\n";
+  if (entries.empty()) return;
+  std::size_t longest = 0;
+  for (const Series* s : entries) longest = std::max(longest, s->legend.size());
+  const double w = 40 + 6.5 * static_cast<double>(longest), h = 8 + 18.0 * entries.size();
+  const double x0 = l.left + l.pw - w - 8, y0 = l.top + 8;
+  o << "<g>\n<rect x=\"" << Num(x0) << "\" y=\"" << Num(y0) << "\" width=\"" << Num(w)
+    << "\" height=\"" << Num(h) << "\" fill=\"white\" fill-opacity=\"0.85\" stroke=\"#999999\"/>\n";
+  for (std::size_t k = 0; k < entries.size(); ++k) {
+    const Series& s = *entries[k];
+    const double y = y0 + 15 + 18.0 * k;
+    if (s.kind == Series::Kind::kScatter) {
+      o << "<circle cx=\"" << Num(x0 + 17) << "\" cy=\"" << Num(y - 4) << "\" r=\"3.5\" fill=\""
+        << s.style.color.Hex() << "\"/>\n";
+    } else {
+      o << "<line x1=\"" << Num(x0 + 6) << "\" y1=\"" << Num(y - 4) << "\" x2=\"" << Num(x0 + 28)
+        << "\" y2=\"" << Num(y - 4) << "\" stroke=\"" << s.style.color.Hex() << "\" stroke-width=\""
+        << Num(s.style.width) << "\"" << (s.style.dashed ? " stroke-dasharray=\"6,4\"" : "")
+        << "/>\n";
     }
-    o << "</g>\n";
-  }
-
-  // Colour bar.
-  if (has_colorbar_) {
-    const double bx = left + pw + 20, bw = 16;
-    o << "<rect x=\"" << Num(bx) << "\" y=\"" << Num(top) << "\" width=\"" << Num(bw)
-      << "\" height=\"" << Num(ph) << "\" fill=\"url(#colorbar)\" stroke=\"#333333\"/>\n";
-    const double cstep = NiceStep(cmax_ - cmin_, 5);
-    for (double v = std::ceil(cmin_ / cstep) * cstep; v <= cmax_ + 1e-9 * cstep; v += cstep) {
-      const double y = top + ph - (v - cmin_) / (cmax_ - cmin_) * ph;
-      o << "<line x1=\"" << Num(bx + bw) << "\" y1=\"" << Num(y) << "\" x2=\"" << Num(bx + bw + 4)
-        << "\" y2=\"" << Num(y) << "\" stroke=\"#333333\"/>\n";
-      o << "<text x=\"" << Num(bx + bw + 6) << "\" y=\"" << Num(y + 4) << "\">"
-        << TickLabel(v, cstep) << "</text>\n";
-    }
-    o << "<text transform=\"translate(" << Num(width_ - 12) << "," << Num(top + ph / 2)
-      << ") rotate(-90)\" text-anchor=\"middle\" font-size=\"13\">" << XmlEscape(colorbar_label_)
+    o << "<text x=\"" << Num(x0 + 34) << "\" y=\"" << Num(y) << "\">" << XmlEscape(s.legend)
       << "</text>\n";
   }
+  o << "</g>\n";
+}
+
+void SvgPlot::RenderColorBar(std::ostream& o, const Layout& l) const {
+  const double bx = l.left + l.pw + 20, bw = 16;
+  o << "<rect x=\"" << Num(bx) << "\" y=\"" << Num(l.top) << "\" width=\"" << Num(bw)
+    << "\" height=\"" << Num(l.ph) << "\" fill=\"url(#colorbar)\" stroke=\"#333333\"/>\n";
+  const double cstep = NiceStep(cmax_ - cmin_, 5);
+  for (double v = std::ceil(cmin_ / cstep) * cstep; v <= cmax_ + 1e-9 * cstep; v += cstep) {
+    const double y = l.top + l.ph - (v - cmin_) / (cmax_ - cmin_) * l.ph;
+    o << "<line x1=\"" << Num(bx + bw) << "\" y1=\"" << Num(y) << "\" x2=\"" << Num(bx + bw + 4)
+      << "\" y2=\"" << Num(y) << "\" stroke=\"#333333\"/>\n";
+    o << "<text x=\"" << Num(bx + bw + 6) << "\" y=\"" << Num(y + 4) << "\">" << TickLabel(v, cstep)
+      << "</text>\n";
+  }
+  o << "<text transform=\"translate(" << Num(width_ - 12) << "," << Num(l.top + l.ph / 2)
+    << ") rotate(-90)\" text-anchor=\"middle\" font-size=\"13\">" << XmlEscape(colorbar_label_)
+    << "</text>\n";
+}
+
+std::string SvgPlot::Render() const {
+  const Layout layout = ComputeLayout();
+  std::ostringstream o;
+  RenderHeader(o, layout);
+  RenderGrid(o, layout);
+  RenderData(o, layout);
+  RenderFrameAndLabels(o, layout);
+  RenderLegend(o, layout);
+  if (has_colorbar_) RenderColorBar(o, layout);
   o << "</svg>\n";
   return o.str();
 }

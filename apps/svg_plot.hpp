@@ -4,6 +4,7 @@
 /// bar), horizontal reference lines, box plots and a legend. Used by `planeslam eval` and the
 /// benchmark plots; the output is standalone SVG 1.1 that browsers and `xmllint` accept.
 #include <cstdint>
+#include <iosfwd>
 #include <string>
 #include <vector>
 
@@ -75,6 +76,25 @@ class SvgPlot {
     double radius = 2.5;
     std::string legend;
   };
+  /// The plot area and the data-to-pixel mapping (svg_plot.cpp).
+  struct Layout;
+
+  Layout ComputeLayout() const;
+  /// XML prolog, title, clip path, colour-bar gradient, white background.
+  void RenderHeader(std::ostream& o, const Layout& l) const;
+  /// Grid lines and tick labels (box labels on the x axis of box plots).
+  void RenderGrid(std::ostream& o, const Layout& l) const;
+  /// Boxes and series, clipped to the plot area.
+  void RenderData(std::ostream& o, const Layout& l) const;
+  void RenderBoxes(std::ostream& o, const Layout& l) const;
+  static void RenderLine(std::ostream& o, const Layout& l, const Series& s);
+  void RenderPoints(std::ostream& o, const Layout& l, const Series& s) const;
+  static void RenderHorizontalLine(std::ostream& o, const Layout& l, const Series& s);
+  /// Frame of the plot area, title and axis labels.
+  void RenderFrameAndLabels(std::ostream& o, const Layout& l) const;
+  void RenderLegend(std::ostream& o, const Layout& l) const;
+  void RenderColorBar(std::ostream& o, const Layout& l) const;
+
   std::string title_, x_label_, y_label_;
   int width_ = 800, height_ = 500;
   bool equal_aspect_ = false;

@@ -19,9 +19,8 @@ namespace planeslam::app::pcl_baselines {
 
 /// Settings of the `pcl_omps` baseline: IntegralImageNormalEstimation followed by
 /// OrganizedMultiPlaneSegmentation::segment(). The defaults are tuned so the baseline is not a straw
-/// man on noisy Kinect data: chosen by a grid search (normal method, smoothing 5/10/20, angle
-/// 3/5/8 deg, depth change 0.01/0.02/0.05, distance 0.02/0.04, curvature 0.001-0.03) on the
-/// synthetic room with Kinect noise, by the share of correctly detected planes (Hoover T = 0.8).
+/// man on noisy Kinect data: each is the best of its plausible range on the synthetic room with
+/// Kinect noise, by the share of correctly detected planes (Hoover T = 0.8).
 /// PCL's own default maximum curvature (0.001) rejects most real Kinect planes (depth noise grows
 /// with z^2, so a noisy wall's lambda_min / trace exceeds it).
 struct OmpsConfig {
@@ -30,13 +29,14 @@ struct OmpsConfig {
   /// Depth discontinuity factor: neighbours whose depth differs more than factor*z are not smoothed
   /// across [1/m]. PCL's organized segmentation demo uses 0.02.
   double max_depth_change_factor = 0.02;
-  /// Smoothing window of the integral-image normals [px] (scaled with depth by PCL). 20 (PCL's
-  /// demo) smooths across the room's edges and under-segments; 5 leaves Kinect noise in the normals.
+  /// Smoothing window of the integral-image normals [px] (scaled with depth by PCL). A wider window
+  /// (PCL's demo: 20) smooths across edges and under-segments; a narrower one leaves Kinect noise
+  /// in the normals.
   double normal_smoothing_size = 10.0;
   /// Minimum region size [px]; the same as our detectors' default minimum plane size (theta).
   int min_inliers = 400;
-  /// Maximum angle between neighbouring normals inside one region [deg]. 3 fragments noisy
-  /// Kinect walls into pieces, 8 merges adjacent faces; 5 was best on the synthetic room.
+  /// Maximum angle between neighbouring normals inside one region [deg]. A smaller angle fragments
+  /// noisy Kinect walls into pieces, a larger one merges adjacent faces.
   double angular_threshold_deg = 5.0;
   /// Maximum difference of neighbouring plane offsets; PCL scales it by z^2 [m at z = 1 m].
   double distance_threshold = 0.02;
