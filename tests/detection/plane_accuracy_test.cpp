@@ -1,4 +1,4 @@
-// Plane accuracy on ray-cast scenes with Kinect-like noise along the ray: the final fit along the
+// Plane accuracy on rendered scenes with Kinect-like noise along the ray: the final fit along the
 // rays (DetectionParams::ray_fit) must remove the eigen fit's bias on surfaces seen at grazing
 // angles, a narrow plane must give back the strip of its neighbours that growth hands it at a
 // crease, and the count term of epsilon must keep a board apart from the wall behind it.
@@ -64,10 +64,9 @@ std::vector<test::GtPlane> DoorRecess() {
 }
 
 TEST(RayFit, GrazingFloorWithoutTheEigenFitBias) {
-  // A floor 0.8 m below the camera, pitched 12 deg: rays meet it at 60-90 deg incidence, 1-8 m
-  // away. Over five noise draws the eigen fit's normal is pulled towards the rays; the ray fit
-  // is not. Measured (mean of 5): eigen fit 0.008 deg (grid) / 0.027 deg (point), ray fit
-  // 0.001 / 0.004 deg.
+  // A floor 0.8 m below the camera, pitched 12 deg: rays meet it 3.4-8 m away at 77-85 deg
+  // incidence. Over five noise draws the eigen fit's normal is pulled towards the rays; the ray
+  // fit's is not.
   const double deg = M_PI / 180.0;
   const Eigen::Vector3d n(0, std::cos(12 * deg), -std::sin(12 * deg));
   for (const char* method : {"grid", "point"}) {
@@ -88,9 +87,8 @@ TEST(RayFit, GrazingFloorWithoutTheEigenFitBias) {
 }
 
 TEST(RayFit, DoorJambGivesBackItsNeighboursStrip) {
-  // Measured over seeds 1-5 (jamb 6720 px): without the ray fit the jamb holds 6028 (grid) /
-  // 6254 (point) pixels of the wall and door and tilts by up to 1.4 / 2.3 deg; with it 1809 /
-  // 2477 and at most 0.11 / 0.13 deg.
+  // Without the ray fit the jamb takes a strip of the wall and the door at its two creases and
+  // tilts towards them; with it, the strip's pixels are asked again along the rays and go back.
   const auto planes = DoorRecess();
   for (const char* method : {"grid", "point"}) {
     int foreign_sum[2] = {0, 0};
@@ -136,11 +134,10 @@ TEST(RayFit, NoiseFreePlanesAreExact) {
 }
 
 TEST(EpsilonCountSigmas, BoardTwoCentimetresInFrontOfItsWallStaysApart) {
-  // A wall 1.7 m away seen at 20 deg, and a 0.8 x 0.6 m board 2 cm in front of it (the synthetic
-  // room's whiteboard). Under Kinect noise (4 mm at 1.7 m) the flat epsilon factor (1.5) lets one
-  // region take both through a compromise plane (measured, seeds 1-3, both methods: one plane,
-  // ~257 000 wall pixels in the board's region); the count term keeps a large region's MSE near
-  // the model's, and the two apart.
+  // A wall 1.7 m away seen at 20 deg, and a 0.8 x 0.6 m board 2 cm in front of it (like a
+  // whiteboard). Under Kinect noise (4 mm at 1.7 m) the flat epsilon factor (1.5) lets one region
+  // take both through a compromise plane; the count term keeps a large region's MSE near the
+  // model's, and the two apart.
   const Eigen::Vector3d n = Eigen::Vector3d(-0.2, -0.23, 0.95).normalized();
   test::GtPlane wall{n, 1.70};
   test::GtPlane board{n, 1.68};
