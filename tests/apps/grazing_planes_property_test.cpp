@@ -173,10 +173,10 @@ Tally RunGrazingDraws(const std::string& method, int draws, bool noise, double m
     if (failures.empty()) continue;
     ++tally.failed;
     bool grazing = false;
-    for (const auto& f : failures) grazing = grazing || f.rfind("ground-truth plane 0 ", 0) == 0;
+    for (const auto& f : failures) grazing = grazing || f.plane == 0;
     tally.grazing_failed += grazing;
     std::cout << method << " draw " << i << " (" << draw.description << ", wall "
-              << grazing_pixels << " px): " << failures.front() << "\n";
+              << grazing_pixels << " px): " << failures.front().what << "\n";
   }
   std::cout << method << ": " << tally.failed << " of " << tally.draws << " draws failed ("
             << tally.grazing_failed << " on the grazing wall; the wall had " << kMinPixels
@@ -238,7 +238,7 @@ RubbleTally RunRubble(const std::string& method, int frames) {
         test::PlanesNotFound(frame, detector->Detect(frame.cloud), kMinPixels, 2.0, 0.02);
     tally.missed += static_cast<int>(failures.size());
     for (const auto& failure : failures) {
-      std::cout << method << " rubble frame " << index << ": " << failure << "\n";
+      std::cout << method << " rubble frame " << index << ": " << failure.what << "\n";
     }
   }
   std::cout << method << ": " << tally.missed << " of " << tally.planes
