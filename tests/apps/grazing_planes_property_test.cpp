@@ -35,12 +35,13 @@
 //   point-paper     24       27              1        3             81        90
 //
 // The grazing wall has 2000 px or more in 192 of the 200 noisy draws and 59 of the 60 noise-free
-// ones. grid and point find every plane in every draw; grid-fast's failures are far ceilings
+// ones. grid and point find every plane in every draw; grid-fast's three failures are ceilings
 // (0.4-1 deg, 2-5 cm off), not the grazing wall. The paper-exact methods have neither the
 // pixel-level refinement nor the fit along the rays: grid-paper's grids that straddle the
 // grazing wall's corner pull its fit (noise-free too), and under noise the eigen fit's bias on
-// grazing planes remains, so grid-paper's grazing walls and point-paper's far walls and ceilings
-// come out a few tenths of a degree and centimetres off, beyond these bounds.
+// planes seen at a slant remains, so grid-paper's grazing walls and point-paper's walls, floors
+// and ceilings in rooms 2-4 m deep come out a few tenths of a degree and centimetres off,
+// beyond these bounds.
 #include <gtest/gtest.h>
 
 #include <algorithm>
