@@ -57,15 +57,11 @@ TEST(GridRegionGrowing, NoiseFreeRoomDepthThresholds) {
 }
 
 TEST(GridRegionGrowing, FastVariantsNoiseFreeAndKinectNoiseWhereverTheGridsFall) {
-  // grid-fast noise-free under both threshold
-  // models and with Kinect noise (1-4 m), on the room rendered 630 to 652 pixels wide: the image
-  // centre, and so where grid-fast's grids cut the corners, moves by a pixel from one width to the
-  // next. (With 5x5 grids, fitted to all its grids, the grazing right wall came out 5-16 mm off on
-  // the noise-free frames 638 and 648 px wide and 2.6 cm off on a noisy one; fitted to them without
-  // the ray fit, 2.0-3.4 cm off on three noisy ones. With 6x6 grids, fitted to all its grids when
-  // too narrow for the interior fit, it came out 6-11 mm off noise-free at 632 and 634 px, until
-  // the grid-level refinement took in the rim grids growth had left out: the wall now has interior
-  // grids enough.)
+  // grid-fast noise-free under both threshold models and with Kinect noise (1-4 m), on the room
+  // rendered 630 to 652 pixels wide: the image centre, and so where grid-fast's grids cut the
+  // corners, moves by a pixel from one width to the next. The grazing right wall is a column or
+  // two of 6x6 grids there; the grid-level refinement takes in the rim grids growth left out, so
+  // the wall keeps interior grids enough for its fit.
   for (int width = 630; width <= 652; width += 2) {
     for (const bool depth : {true, false}) {
       {

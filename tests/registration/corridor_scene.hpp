@@ -1,24 +1,44 @@
 #pragma once
-// A ray-cast corridor for the registration tests: two walls, floor and ceiling along world X, no
-// end wall, optionally a cabinet and a pillar that give structure along the axis.
+// A corridor for the registration tests, rendered by the simulation library (datasets/sim): two
+// walls, floor and ceiling along world X, no end wall, optionally a cabinet and a pillar that give
+// structure along the axis. The camera sees 8 m far; beyond, no return (no visible end).
 #include <Eigen/Geometry>
 #include <random>
 #include <vector>
 
+#include "detection/synthetic_scene.hpp"
 #include "planeslam/datasets/organized_cloud.hpp"
+#include "planeslam/datasets/synthetic_scene.hpp"
+#include "planeslam/datasets/synthetic_sensor.hpp"
 #include "registration/registration_test_util.hpp"
 
 namespace planeslam::registration::test {
 
-struct Box {
-  Eigen::Vector3d lo, hi;
+struct CorridorScene {
+  std::vector<std::pair<Eigen::Vector3d, double>> planes;  ///< the corridor's planes, world n.p = k
+  datasets::SyntheticScene scene;                          ///< the planes and the boxes
+  double max_range = 8.0;                                  ///< [m]
 };
 
-struct CorridorScene {
-  std::vector<std::pair<Eigen::Vector3d, double>> planes;  ///< world n.p = k
-  std::vector<Box> boxes;
-  double max_range = 8.0;  ///< [m], beyond: no return (the corridor has no visible end)
-};
+/// Adds the six faces of the axis-aligned box [lo, hi] (outward normals) to `scene`.
+inline void AddBox(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi,
+                   datasets::SyntheticScene& scene) {
+  for (int axis = 0; axis < 3; ++axis) {
+    for (const double side : {-1.0, 1.0}) {
+      datasets::ScenePlane face;
+      face.id = static_cast<int>(scene.planes.size()) + 1;
+      face.name = "box";
+      face.normal = side * Eigen::Vector3d::Unit(axis);
+      const double at = side < 0 ? lo(axis) : hi(axis);
+      face.d = side * at;
+      Eigen::Vector3d flo = lo, fhi = hi;
+      flo(axis) = at - 1e-9;
+      fhi(axis) = at + 1e-9;
+      face.polygons.push_back(planeslam::test::PlaneInBox(face.normal, face.d, flo, fhi));
+      scene.planes.push_back(face);
+    }
+  }
+}
 
 inline CorridorScene MakeCorridor(bool with_features) {
   CorridorScene s;
@@ -26,9 +46,12 @@ inline CorridorScene MakeCorridor(bool with_features) {
               {Eigen::Vector3d::UnitY(), -1.0},
               {Eigen::Vector3d::UnitZ(), -1.2},
               {Eigen::Vector3d::UnitZ(), 1.3}};
+  std::vector<planeslam::test::GtPlane> planes;
+  for (const auto& [n, k] : s.planes) planes.push_back({n, k});
+  s.scene = planeslam::test::SceneOf(planes);
   if (with_features) {
-    s.boxes.push_back({{3.0, 0.6, -1.2}, {3.6, 1.0, -0.2}});    // cabinet on the left wall
-    s.boxes.push_back({{5.0, -1.0, -1.2}, {5.25, -0.7, 1.3}});  // pillar / door frame
+    AddBox({3.0, 0.6, -1.2}, {3.6, 1.0, -0.2}, s.scene);    // cabinet on the left wall
+    AddBox({5.0, -1.0, -1.2}, {5.25, -0.7, 1.3}, s.scene);  // pillar / door frame
   }
   return s;
 }
@@ -53,50 +76,26 @@ inline Eigen::Matrix3d LookAlongX() {
   return r;
 }
 
-inline bool RayBox(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const Box& b, double* t) {
-  double tmin = 0.0, tmax = 1e30;
-  for (int i = 0; i < 3; ++i) {
-    if (std::abs(d(i)) < 1e-12) {
-      if (o(i) < b.lo(i) || o(i) > b.hi(i)) return false;
-      continue;
-    }
-    double t1 = (b.lo(i) - o(i)) / d(i), t2 = (b.hi(i) - o(i)) / d(i);
-    if (t1 > t2) std::swap(t1, t2);
-    tmin = std::max(tmin, t1);
-    tmax = std::min(tmax, t2);
-  }
-  if (tmax < tmin || tmin <= 0) return false;
-  *t = tmin;
-  return true;
-}
-
-/// Organized cloud seen by a camera at T_world_cam, with Gaussian depth noise `sigma` [m].
+/// Organized cloud seen by a camera at T_world_cam, with Gaussian depth noise `sigma` [m] drawn
+/// from `rng` pixel by pixel in row-major order.
 inline datasets::OrganizedCloud RayCast(const CorridorScene& s,
                                         const datasets::PinholeIntrinsics& k,
                                         const Pose& T_world_cam, double sigma, std::mt19937& rng) {
+  datasets::PinholeSimConfig config;
+  config.intrinsics = k;
+  config.max_depth = s.max_range;
+  config.min_depth = 0.0;
+  config.noise = false;
+  config.max_incidence_deg = 90.0;
+  config.edge_dropout = false;
+  datasets::OrganizedCloud cloud =
+      datasets::MakePinholeSensor(s.scene, config)->Render(T_world_cam, 0).cloud;
+  if (sigma == 0.0) return cloud;
   std::normal_distribution<double> g(0.0, 1.0);
-  datasets::OrganizedCloud cloud(k.width, k.height, datasets::SensorModel::kPinhole);
-  const Eigen::Matrix3d R = T_world_cam.linear();
-  const Eigen::Vector3d o = T_world_cam.translation();
-  for (int r = 0; r < k.height; ++r) {
-    for (int c = 0; c < k.width; ++c) {
-      const Eigen::Vector3d d_cam((c - k.cx) / k.fx, (r - k.cy) / k.fy, 1.0);
-      const Eigen::Vector3d d = R * d_cam;
-      double best = 1e30;
-      for (const auto& [n, off] : s.planes) {
-        const double den = n.dot(d);
-        if (std::abs(den) < 1e-12) continue;
-        const double t = (off - n.dot(o)) / den;
-        if (t > 0 && t < best) best = t;
-      }
-      for (const Box& b : s.boxes) {
-        double t;
-        if (RayBox(o, d, b, &t) && t < best) best = t;
-      }
-      if (best > s.max_range) continue;  // d_cam.z = 1, so t is the depth
-      const double z = best + sigma * g(rng);
-      cloud.at(r, c) = (d_cam * z).cast<float>();
-    }
+  for (std::size_t i = 0; i < cloud.points.size(); ++i) {
+    if (!cloud.IsValid(i)) continue;
+    const Eigen::Vector3d p = cloud.points[i].cast<double>();
+    cloud.points[i] = (p * ((p.z() + sigma * g(rng)) / p.z())).cast<float>();
   }
   return cloud;
 }
