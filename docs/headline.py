@@ -22,27 +22,49 @@ def load(out, name):
     return json.loads(path.read_text()) if path.exists() else None
 
 
-def detect_speed(out, name):
-    records = load(out, name)
-    if not records:
+def is_vga(record):
+    return (record["width"], record["height"]) == (640, 480)
+
+
+def ratios(records, method):
+    """Median over frames of PCL's time / the method's, on all frames and on the 640 x 480 ones."""
+    rows = [r for r in records if r["method"] == method]
+    return (statistics.median(r["speedup_vs_pcl"] for r in rows),
+            statistics.median(r["speedup_vs_pcl"] for r in rows if is_vga(r)))
+
+
+def detect_speed(out):
+    runs = [json.loads(p.read_text()) for p in sorted(out.glob("detect_speed_[0-9].json"))]
+    if not runs:
         return
-    methods = list(dict.fromkeys(r["method"] for r in records))
-    frames = len({r["frame"] for r in records})
-    vga = len({r["frame"] for r in records if (r["width"], r["height"]) == (640, 480)})
-    pcl = statistics.median(r["median_ms"] for r in records if r["method"] == "pcl_omps")
-    print(f"detection speed ({name}: {frames} frames, {vga} of 640 x 480; PCL OMPS median "
-          f"{pcl:.1f} ms a frame)")
-    print(f"  {'method':12} {'x PCL all':>10} {'x PCL 640x480':>14} {'planes':>7} {'assigned':>9}")
+    first = runs[0]
+    methods = [m for m in dict.fromkeys(r["method"] for r in first) if m != "pcl_omps"]
+    frames = len({r["frame"] for r in first})
+    vga = len({r["frame"] for r in first if is_vga(r)})
+    pcl = [statistics.median(r["median_ms"] for r in run if r["method"] == "pcl_omps")
+           for run in runs]
+    print(f"detection speed: {len(runs)} runs of {frames} frames ({vga} of 640 x 480); PCL OMPS "
+          f"{min(pcl):.1f}-{max(pcl):.1f} ms a frame (median over frames)")
+    print(f"  {'method':12} {'x PCL, all frames':>22} {'x PCL, 640 x 480':>22} {'planes':>7} "
+          f"{'assigned':>9}")
     for m in methods:
-        if m == "pcl_omps":
-            continue
-        rows = [r for r in records if r["method"] == m]
-        all_ratio = statistics.median(r["speedup_vs_pcl"] for r in rows)
-        vga_ratio = statistics.median(
-            r["speedup_vs_pcl"] for r in rows if (r["width"], r["height"]) == (640, 480))
+        both = [ratios(run, m) for run in runs]
+        rows = [r for r in first if r["method"] == m]
         planes = statistics.median(r["planes"] for r in rows)
         assigned = statistics.median(r["assigned_fraction"] for r in rows)
-        print(f"  {m:12} {all_ratio:9.1f}x {vga_ratio:13.1f}x {planes:7.1f} {100 * assigned:8.1f}%")
+        cells = []
+        for values in zip(*both):
+            cells.append(f"{statistics.median(values):.1f}x ({min(values):.1f}-{max(values):.1f})")
+        print(f"  {m:12} {cells[0]:>22} {cells[1]:>22} {planes:7.1f} {100 * assigned:8.1f}%")
+    for p in sorted(out.glob("detect_speed_grid*.json")):
+        records = json.loads(p.read_text())
+        name = next(r["method"] for r in records if r["method"] != "pcl_omps")
+        rows = [r for r in records if r["method"] == name]
+        all_ratio, vga_ratio = ratios(records, name)
+        label = f"{name} k={p.stem[len('detect_speed_grid'):]}"
+        print(f"  {label:12} {all_ratio:>21.1f}x {vga_ratio:>21.1f}x "
+              f"{statistics.median(r['planes'] for r in rows):7.1f} "
+              f"{100 * statistics.median(r['assigned_fraction'] for r in rows):8.1f}%  (own run)")
 
 
 def quality(out):
@@ -54,9 +76,10 @@ def quality(out):
         for r in synthetic:
             if r["kind"] != "segmentation":
                 continue
+            error = "-" if r["correct"] == 0 else \
+                f"{r['normal_error_mean_deg']:.3f} / {r['normal_error_max_deg']:.2f} deg"
             print(f"  {r['dataset']:18} {r['method']:10} {100 * r['correct_rate']:6.1f}%  "
-                  f"{r['normal_error_mean_deg']:.3f} / {r['normal_error_max_deg']:.2f} deg  "
-                  f"F1 {r['f1']:.3f}")
+                  f"{error:18} F1 {r['f1']:.3f}  pixacc {r['pixel_accuracy']:.3f}")
     if tum:
         print("plane repeatability, TUM fr3 (median angle / offset of matched large planes, "
               "share of large planes matched)")
@@ -127,8 +150,7 @@ def graph(out):
 
 def main():
     out = pathlib.Path(sys.argv[1])
-    detect_speed(out, "detect_speed.json")
-    detect_speed(out, "detect_speed_grid6.json")
+    detect_speed(out)
     quality(out)
     odometry(out)
     slam(out)

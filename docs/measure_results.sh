@@ -49,16 +49,21 @@ step() {
   echo "planeslam: $PLANESLAM"
   echo "data: $DATA"
   echo "source: $(git -C "$ROOT" describe --always --dirty 2>/dev/null || echo unknown)"
-  echo "cpus: $(nproc)"
-  echo "started: $(date -u +%FT%TZ)"
+  echo "cpus: $(nproc), $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | xargs)"
+  echo "started: $(date -u +%FT%TZ), load average $(cut -d' ' -f1-3 /proc/loadavg)"
 } >"$OUT/machine.txt"
 
 # 1. Detection speed: the 14 default frames (every 50th TUM frame, the Kinect PCDs, the laser
-# scans), every method interleaved with PCL's OrganizedMultiPlaneSegmentation.
-step detect_speed "$PLANESLAM" bench detect --repeat 5 -q \
-  --methods grid,grid-fast,grid-paper,point,point-paper,pcl_omps --json "$OUT/detect_speed.json"
-step detect_speed_grid6 "$PLANESLAM" bench detect --repeat 5 -q --methods grid,pcl_omps \
-  --set grid.cell_size=6 --json "$OUT/detect_speed_grid6.json"
+# scans), every method interleaved with PCL's OrganizedMultiPlaneSegmentation on each frame; three
+# runs, as the machine's load changes from minute to minute. Then grid with other grid sizes.
+for run in 1 2 3; do
+  step detect_speed_$run "$PLANESLAM" bench detect --repeat 5 -q \
+    --methods grid,grid-fast,grid-paper,point,point-paper,pcl_omps --json "$OUT/detect_speed_$run.json"
+done
+for k in 4 5 6; do
+  step detect_speed_grid$k "$PLANESLAM" bench detect --repeat 5 -q --methods grid,pcl_omps \
+    --set grid.cell_size=$k --json "$OUT/detect_speed_grid$k.json"
+done
 
 # 2. Detection quality: synthetic scenes against their ground-truth labels, and TUM repeatability.
 step quality_synthetic "$PLANESLAM" bench detect --quality -q -c config/detection_synthetic.yaml \
@@ -91,6 +96,7 @@ step graph_garage "$PLANESLAM" graph optimize "$DATA/pose_graphs/parking-garage.
   --raw-information --set pose_graph.loop_closure_loss=none --out "$OUT/garage_opt.g2o" \
   --json "$OUT/graph_garage.json"
 
-echo "finished: $(date -u +%FT%TZ), $((SECONDS - START)) s" >>"$OUT/machine.txt"
+echo "finished: $(date -u +%FT%TZ), $((SECONDS - START)) s, load average $(cut -d' ' -f1-3 /proc/loadavg)" \
+  >>"$OUT/machine.txt"
 python3 docs/headline.py "$OUT" | tee "$OUT/headline.txt"
 echo "raw outputs in $OUT/ ($((SECONDS - START)) s)"
