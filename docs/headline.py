@@ -144,7 +144,7 @@ def graph(out):
     g = load(out, "graph_garage.json")
     if g:
         print(f"pose graph parking-garage.g2o: {g['vertices']} poses, {g['edges']} edges, cost "
-              f"{g['initial_cost']:.6e} to {g['final_cost']:.6e} in {g['iterations']} "
+              f"{g['initial_cost']:.3f} to {g['final_cost']:.7f} in {g['iterations']} "
               f"iterations, converged {g['converged']}")
 
 
