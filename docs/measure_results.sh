@@ -9,7 +9,7 @@
 #   OUT_DIR    where the raw outputs go (replaced); default: results_out
 #
 # Relative paths are taken from the repository root. `make results` builds and runs this.
-# About 6 minutes on a 2-core machine. Speed is reported as ratios of methods timed in one
+# 3 to 6 minutes on a 2-core machine. Speed is reported as ratios of methods timed in one
 # process on the same frames, which holds on a busy machine; absolute milliseconds do not.
 set -euo pipefail
 
