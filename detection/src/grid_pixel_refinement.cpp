@@ -129,16 +129,20 @@ class PixelRefiner {
     const Eigen::Vector3f* pts = image_.pts;
     std::int32_t* const labels = labels_.data();
     std::pair<std::size_t, int>* const moved = work_.moved_pixels.data();
-    const int own = own_, n_adj = n_adj_;
+    const int own = own_, n_adj = n_adj_, width = image_.width;
+    const int x0 = x0_, y0 = y0_, x1 = x1_, y1 = y1_;
+    const bool spherical = image_.spherical;
+    int adj[9];
+    std::copy(adj_, adj_ + n_adj, adj);
     int first_to = -2;  // -2: no valid pixel yet
     bool one_plane = true;
     std::size_t num_moved = 0;
-    for (int y = y0_; y < y1_; ++y) {
-      for (int x = x0_; x < x1_; ++x) {
-        const std::size_t idx = static_cast<std::size_t>(y) * image_.width + x;
+    for (int y = y0; y < y1; ++y) {
+      for (int x = x0; x < x1; ++x) {
+        const std::size_t idx = static_cast<std::size_t>(y) * width + x;
         const Eigen::Vector3f& pf = pts[idx];
         if (!std::isfinite(pf.z())) continue;
-        const float z = internal::PointDepth(pf, image_.spherical);
+        const float z = internal::PointDepth(pf, spherical);
         int best;
         if constexpr (SingleCandidate::value) {
           float dist, tol;
@@ -147,7 +151,7 @@ class PixelRefiner {
         } else {
           best = choice_.BestPlane(pf, choice_.RelativeNoise(z), &cand_[0][0], n_adj);
         }
-        const int to = best >= 0 ? adj_[best] : -1;
+        const int to = best >= 0 ? adj[best] : -1;
         labels[idx] = to;
         moved[num_moved] = {idx, best >= 0 ? best : n_adj};  // kept if it leaves (no branch)
         num_moved += to != own;
