@@ -1,4 +1,4 @@
-#include "planeslam/detection/fast_moments.hpp"
+#include "fast_moments.hpp"
 
 #include <Eigen/Geometry>
 #include <algorithm>

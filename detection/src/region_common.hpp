@@ -9,8 +9,8 @@
 #endif
 
 #include "planeslam/datasets/organized_cloud.hpp"
+#include "fast_moments.hpp"
 #include "planeslam/detection/detection_config.hpp"
-#include "planeslam/detection/fast_moments.hpp"
 #include "planeslam/detection/plane.hpp"
 
 namespace planeslam::detection::internal {
