@@ -81,8 +81,7 @@ void FinalFit(const GridImage& image, const CellMoments& cells, bool grid_labels
     fit_rays = fits ? &fits->rays : &regions.rays;
   }
   internal::FinalizeSegmentation(image.cloud, region_image, regions.sums, regions.rays,
-                                 borders.pixels, image.params, out, fit_sums, fit_rays,
-                                 label_root);
+                                 borders.pixels, image.params, out, fit_sums, fit_rays, label_root);
   if (!grid_labels) return;
   // out.labels holds each grid's plane id: expand it to the pixels.
   std::vector<std::int32_t>& grid_ids = ThreadFinalFitWork().grid_ids;

@@ -54,8 +54,7 @@ struct GrowingRegion {
 /// Grows regions from seeds, one at a time (Algorithm 2 lines 5-15).
 class RegionGrower {
  public:
-  RegionGrower(const GridImage& image, const CellMoments& cells, Regions& regions,
-               GrowthWork& work)
+  RegionGrower(const GridImage& image, const CellMoments& cells, Regions& regions, GrowthWork& work)
       : image_(image),
         params_(image.params),
         grid_(image.grid),
@@ -142,8 +141,7 @@ class RegionGrower {
     const int cells_x = image_.cells_x;
     const auto [cx, cy] = image_.Xy(c);
     const int neighbours[4] = {cx + 1 < cells_x ? c + 1 : c, cx > 0 ? c - 1 : c,
-                               cy + 1 < image_.cells_y ? c + cells_x : c,
-                               cy > 0 ? c - cells_x : c};
+                               cy + 1 < image_.cells_y ? c + cells_x : c, cy > 0 ? c - cells_x : c};
     std::int32_t* const marks = work_.mark.data();
     for (const int nb : neighbours) {
       // Not planar, in R, R' or this region; or queued already.

@@ -112,9 +112,9 @@ class Classifier {
     const double* const w[6] = {b_.dense_w[0].data(), b_.dense_w[1].data(), b_.dense_w[2].data(),
                                 b_.dense_w[3].data(), b_.dense_w[4].data(), b_.dense_w[5].data()};
     const double* const normals[3] = {v1[0], v1[1], v1[2]};
-    GridNoiseBatch(b_.dense_k.data(), w, b_.l2.data(), normals, num_dense, eta_,
-                   params_.eta_sigmas, b_.isotropic.data(), b_.tilt.data(), b_.effective.data(),
-                   b_.angle.data(), kernel_);
+    GridNoiseBatch(b_.dense_k.data(), w, b_.l2.data(), normals, num_dense, eta_, params_.eta_sigmas,
+                   b_.isotropic.data(), b_.tilt.data(), b_.effective.data(), b_.angle.data(),
+                   kernel_);
   }
 
   /// The rules for the chunk's grid j: its class, and for a planar grid its plane and seed key.

@@ -14,17 +14,17 @@ constexpr double kNarrowRefinePoints = 2000.0;
 
 /// The narrow planes' buffers, reused across frames.
 struct NarrowWork {
-  std::vector<std::uint8_t> narrow;      ///< per plane: too narrow for the interior fit
-  std::vector<MomentSums> apart_sums;    ///< such a plane without its grids next to another plane
+  std::vector<std::uint8_t> narrow;    ///< per plane: too narrow for the interior fit
+  std::vector<MomentSums> apart_sums;  ///< such a plane without its grids next to another plane
   std::vector<RaySums> apart_rays;
   std::vector<std::uint8_t> too_narrow;     ///< planes too narrow for the apart fit as well
   std::vector<std::uint8_t> refine_pixels;  ///< those of them refined pixel by pixel
   std::vector<std::pair<int, int>> narrow_plane_grids;  ///< (such a plane, one of its grids)
   std::vector<int> narrow_grids;                        ///< the grids of one such plane
-  std::vector<int> around;       ///< the grids around them
-  std::vector<int> visit;        ///< per grid: the last such plane it was found around (-1: none)
-  std::vector<int> candidates;   ///< the plane and the planes next to it
-  std::vector<int> candidate_grid;  ///< a grid of each (for its plane id)
+  std::vector<int> around;                              ///< the grids around them
+  std::vector<int> visit;       ///< per grid: the last such plane it was found around (-1: none)
+  std::vector<int> candidates;  ///< the plane and the planes next to it
+  std::vector<int> candidate_grid;      ///< a grid of each (for its plane id)
   std::vector<float> candidate_planes;  ///< n, d of each (PixelChoice::BestPlane)
   /// Each pixel's choice: (pixel, its grid, candidate: 0 the plane itself, -1 none; for a pixel
   /// of a grid around that stays, the grid's own plane's candidate, or -2 when that is none).
@@ -234,9 +234,9 @@ class NarrowPlaneRefiner {
     ray_planes[0] = internal::SolveRegion(first_rays_, first_);
     for (std::size_t j = 1; j < candidates.size(); ++j) {
       const int o = candidates[j];
-      ray_planes[j] = fits_.sums[o].k >= 3 ? internal::SolveRegion(fits_.rays[o], fits_.sums[o])
-                                           : internal::SolveRegion(regions_.rays[o],
-                                                                   regions_.sums[o]);
+      ray_planes[j] = fits_.sums[o].k >= 3
+                          ? internal::SolveRegion(fits_.rays[o], fits_.sums[o])
+                          : internal::SolveRegion(regions_.rays[o], regions_.sums[o]);
     }
     if (!ray_planes[0].ok) return;
     const int num_candidates = static_cast<int>(candidates.size());
@@ -364,9 +364,8 @@ void FitInteriorGrids(const GridImage& image, const CellMoments& cells, const Ed
 /// the grids next to another plane, or, too narrow for that as well, all their grids (then
 /// marked too_narrow, and from kNarrowRefinePoints refine_pixels). Returns whether any plane is
 /// to be refined pixel by pixel.
-bool FitNarrowPlanesApart(const GridImage& image, const CellMoments& cells,
-                          const EdgeGrids& edges, const Regions& regions, GridFits& fits,
-                          NarrowWork& work) {
+bool FitNarrowPlanesApart(const GridImage& image, const CellMoments& cells, const EdgeGrids& edges,
+                          const Regions& regions, GridFits& fits, NarrowWork& work) {
   const bool ray_fit = image.params.ray_fit;
   const std::size_t num_regions = regions.sums.size();
   for (std::size_t r = 0; r < num_regions; ++r) {

@@ -64,8 +64,7 @@ struct GridImage {
   }
   /// The region of the grid at column cx, row cy in `cell_region` (-1: none, or outside).
   std::int32_t RegionAt(const std::vector<std::int32_t>& cell_region, int cx, int cy) const {
-    return cx >= 0 && cy >= 0 && cx < cells_x && cy < cells_y ? cell_region[cy * cells_x + cx]
-                                                              : -1;
+    return cx >= 0 && cy >= 0 && cx < cells_x && cy < cells_y ? cell_region[cy * cells_x + cx] : -1;
   }
 
  private:
@@ -136,8 +135,8 @@ inline bool TooNarrowForInteriorFit(double interior_points, double all_points) {
 /// crease pixels of the ray fit look at them only.
 struct EdgeGrids {
   std::vector<int> grids;
-  std::vector<int> scratch;          ///< edge grids as found (room for every grid)
-  std::vector<std::uint8_t> flags;   ///< whether each grid of a row is an edge grid
+  std::vector<int> scratch;         ///< edge grids as found (room for every grid)
+  std::vector<std::uint8_t> flags;  ///< whether each grid of a row is an edge grid
 };
 void FindEdgeGrids(const GridImage& image, const CellMoments& cells,
                    const std::vector<std::int32_t>& cell_region, EdgeGrids& edges);

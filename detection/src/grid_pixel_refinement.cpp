@@ -228,7 +228,7 @@ class PixelRefiner {
   int first_to_ = -2;  // the plane of the first valid pixel (-2: none yet)
   bool one_plane_ = true;
   std::size_t num_moved_ = 0;  // valid pixels that leave own_
-  MomentSums gained_[10];  // per candidate plane of the grid (and none): what it gains
+  MomentSums gained_[10];      // per candidate plane of the grid (and none): what it gains
   RaySums gained_rays_[10];
 };
 
@@ -239,7 +239,8 @@ void RefinePixels(const GridImage& image, const CellMoments& cells, const EdgeGr
   PixelRefiner refiner(image, cells, regions, labels, ThreadPixelWork());
   const std::size_t num_edge = edges.grids.size();
   for (std::size_t e = 0; e < num_edge; ++e) {
-    if (e + kRefinePrefetchAhead < num_edge) refiner.Prefetch(edges.grids[e + kRefinePrefetchAhead]);
+    if (e + kRefinePrefetchAhead < num_edge)
+      refiner.Prefetch(edges.grids[e + kRefinePrefetchAhead]);
     refiner.RefineGrid(edges.grids[e]);
   }
 }

@@ -29,13 +29,13 @@ bool IsEdgeAtBorder(const GridImage& image, const std::vector<std::int32_t>& cel
 
 /// The grid-level refinement's buffers, reused across frames.
 struct GridRefinementWork {
-  std::vector<FastFit> fits;                     ///< each plane's eigen fit
-  std::vector<std::uint8_t> fit_stale;           ///< per plane: fits[r] is out of date
-  std::vector<std::pair<int, int>> grid_moves;   ///< (grid, plane it moves to) of a pass
-  std::vector<std::int32_t> candidate_stamp;     ///< per plane (+1): last edge grid it was seen at
-  std::vector<double> edge_points;               ///< per plane: the points of its edge grids
-  std::vector<std::uint8_t> is_narrow;           ///< per plane (narrow passes)
-  std::vector<std::uint8_t> at_narrow_plane;     ///< per grid: in or next to a narrow plane
+  std::vector<FastFit> fits;                    ///< each plane's eigen fit
+  std::vector<std::uint8_t> fit_stale;          ///< per plane: fits[r] is out of date
+  std::vector<std::pair<int, int>> grid_moves;  ///< (grid, plane it moves to) of a pass
+  std::vector<std::int32_t> candidate_stamp;    ///< per plane (+1): last edge grid it was seen at
+  std::vector<double> edge_points;              ///< per plane: the points of its edge grids
+  std::vector<std::uint8_t> is_narrow;          ///< per plane (narrow passes)
+  std::vector<std::uint8_t> at_narrow_plane;    ///< per grid: in or next to a narrow plane
 };
 
 GridRefinementWork& ThreadRefinementWork() {
@@ -228,10 +228,9 @@ void FindEdgeGrids(const GridImage& image, const CellMoments& cells,
                          m2 = mid[cx + 1], d0 = down[cx - 1], d1 = down[cx], d2 = down[cx + 1];
       const bool same = (u0 == own) & (u1 == own) & (u2 == own) & (m0 == own) & (m2 == own) &
                         (d0 == own) & (d1 == own) & (d2 == own);
-      const std::int32_t highest =
-          std::max(std::max(std::max(std::max(own, u0), std::max(u1, u2)),
-                            std::max(std::max(m0, m2), std::max(d0, d1))),
-                   d2);
+      const std::int32_t highest = std::max(std::max(std::max(std::max(own, u0), std::max(u1, u2)),
+                                                     std::max(std::max(m0, m2), std::max(d0, d1))),
+                                            d2);
       flags[cx] = (count[cx] != 0) & (highest >= 0) & !((own >= 0) & same);
     }
     for (int cx = 1; cx < last; ++cx) {

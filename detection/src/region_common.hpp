@@ -8,8 +8,8 @@
 #include <emmintrin.h>
 #endif
 
-#include "planeslam/datasets/organized_cloud.hpp"
 #include "fast_moments.hpp"
+#include "planeslam/datasets/organized_cloud.hpp"
 #include "planeslam/detection/detection_config.hpp"
 #include "planeslam/detection/plane.hpp"
 
