@@ -438,6 +438,7 @@ void RefineNarrowPlanes(const GridImage& image, const CellMoments& cells, Region
 void FitGridPlanes(const GridImage& image, const CellMoments& cells, const EdgeGrids& edges,
                    Regions& regions, GridFits& fits) {
   NarrowWork& work = ThreadNarrowWork();
+  fits.pixel_overrides.clear();
   FitInteriorGrids(image, cells, edges, regions, fits);
   // The narrow planes only (most frames have none).
   const std::size_t num_regions = regions.sums.size();

@@ -95,7 +95,6 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   std::vector<std::int32_t>& region_image = grid_labels ? ws.regions.cell_region : ws.labels;
   const internal::RegionBorders borders =
       gbrg::MergeRegions(image, ws.edges, grid_labels, region_image, ws.regions, ws.label_root);
-  ws.fits.pixel_overrides.clear();
   if (grid_fits) gbrg::FitGridPlanes(image, ws.cells, ws.edges, ws.regions, ws.fits);
   gbrg::FinalFit(image, ws.cells, grid_labels, region_image, ws.regions, borders,
                  grid_fits ? &ws.fits : nullptr, ws.label_root, out);
