@@ -47,23 +47,6 @@ class PixelRefiner {
     work_.moved_pixels.resize(static_cast<std::size_t>(image.k) * image.k);
   }
 
-  /// The points of an edge grid were last read by the moments pass and have left the core's
-  /// caches since; the edge grids come with gaps the hardware prefetcher does not follow. Fetches
-  /// the rows of grid `ahead` (first and last point of each row, and its labels, for writing),
-  /// and its noise weight, read when pixels leave (in an array that leaves the cache as well).
-  void Prefetch(int ahead) const {
-    const int k = image_.k, width = image_.width;
-    const auto [ax, ay] = image_.Xy(ahead);
-    const int ay1 = std::min(image_.height, ay * k + k), ax1 = std::min(width, ax * k + k) - 1;
-    for (int y = ay * k; y < ay1; ++y) {
-      const std::size_t row = static_cast<std::size_t>(y) * width;
-      __builtin_prefetch(image_.pts + row + ax * k);
-      __builtin_prefetch(image_.pts + row + ax1);
-      __builtin_prefetch(labels_.data() + row + ax * k, 1);  // written below
-    }
-    __builtin_prefetch(&cells_.noise_weight[ahead]);
-  }
-
   void RefineGrid(int c) {
     const auto [cx, cy] = image_.Xy(c);
     own_ = regions_.cell_region[c];
@@ -237,10 +220,27 @@ class PixelRefiner {
 void RefinePixels(const GridImage& image, const CellMoments& cells, const EdgeGrids& edges,
                   Regions& regions, std::vector<std::int32_t>& labels) {
   PixelRefiner refiner(image, cells, regions, labels, ThreadPixelWork());
+  const int k = image.k, width = image.width;
   const std::size_t num_edge = edges.grids.size();
   for (std::size_t e = 0; e < num_edge; ++e) {
-    if (e + kRefinePrefetchAhead < num_edge)
-      refiner.Prefetch(edges.grids[e + kRefinePrefetchAhead]);
+    // The points of an edge grid were last read by the moments pass and have left the core's
+    // caches since; the edge grids come with gaps the hardware prefetcher does not follow. Fetch
+    // the rows of the grid a few places ahead (first and last point of each row, and its labels,
+    // for writing), and its noise weight, read when pixels leave (in an array that leaves the
+    // cache as well). Here in the loop, not in a function of their own: a function that only
+    // prefetches has no effect the compiler must keep.
+    if (e + kRefinePrefetchAhead < num_edge) {
+      const int ahead = edges.grids[e + kRefinePrefetchAhead];
+      const auto [ax, ay] = image.Xy(ahead);
+      const int ay1 = std::min(image.height, ay * k + k), ax1 = std::min(width, ax * k + k) - 1;
+      for (int y = ay * k; y < ay1; ++y) {
+        const std::size_t row = static_cast<std::size_t>(y) * width;
+        __builtin_prefetch(image.pts + row + ax * k);
+        __builtin_prefetch(image.pts + row + ax1);
+        __builtin_prefetch(labels.data() + row + ax * k, 1);  // written below
+      }
+      __builtin_prefetch(&cells.noise_weight[ahead]);
+    }
     refiner.RefineGrid(edges.grids[e]);
   }
 }
