@@ -1,4 +1,4 @@
-#include "planeslam/detection/fast_moments.hpp"
+#include "fast_moments.hpp"
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -52,9 +52,9 @@ void SymEigenvalues3(const double c[6], double& l1, double& l2, double& l3) {
 namespace {
 
 /// Newton steps before the closed form takes over. Planar sets converge in 3-5; grids of noise
-/// (l1 near l2) need more: with 8 instead of 6, GBRG's classification on TUM frames leaves 134
-/// instead of 2709 of its 29.7k grids to the closed form (acos, cos), and its eigenvalue batch
-/// takes 1.00 instead of 1.10 ms. (The batch loop is unrolled 8 times: 10 steps ran 3x slower.)
+/// (l1 near l2) need more, and each grid left to the closed form (acos, cos) costs far more than
+/// a step. The batch loop is unrolled over the steps, so many more steps cost more than they
+/// save.
 constexpr int kNewtonSteps = 8;
 
 /// The characteristic polynomial p(l) = l^3 - t l^2 + m l - det of a symmetric C (upper triangle
@@ -155,8 +155,7 @@ __attribute__((always_inline)) inline void FinishNewtonLane(NewtonLane a, double
 /// The loop of SymEigenvaluesNewtonBatch. Restrict parameters (distinct arrays) let the compiler
 /// vectorise it without run-time overlap checks. Inlined into one copy per instruction set.
 /// Matrices i and i + n/2 step side by side: each step waits on a division, and two independent
-/// chains keep the divider busy (GBRG's eigenvalues and eigenvectors on TUM frames, 3x3 grids:
-/// 0.99 -> 0.83 ms a frame).
+/// chains keep the divider busy.
 __attribute__((always_inline)) inline void NewtonBatchLoop(
     const double* __restrict c0, const double* __restrict c1, const double* __restrict c2,
     const double* __restrict c3, const double* __restrict c4, const double* __restrict c5, int n,
@@ -479,8 +478,8 @@ FastFit RefitFrom(const MomentSums& m, const Eigen::Vector3d& n0) {
     // sigma the Rayleigh quotient (shifted inverse iteration without a division). Its factor per
     // step is (sigma - l1) / (l2 - sigma), about the square of x's angle from v1: from within
     // ~30 deg of it, 1e-8 rad after two steps. Then l1 <= l2 / 2 must hold, else (x went to v2,
-    // or the plane is barely defined) the closed form decides. This path replaced the closed
-    // form for 80 % of GBRG's refits on TUM frames.
+    // or the plane is barely defined) the closed form decides. Most of GBRG's refits take this
+    // path rather than the closed form.
     for (int it = 0; it < 2; ++it) {
       x = SymAdjugate(c, l1) * x;
       const double shifted_norm2 = x.squaredNorm();
@@ -547,9 +546,8 @@ __attribute__((target("avx2,fma"))) inline __m256d WidenMask(__m128 mask) {
 /// scalar kernel's order; invalid pixels add zeros (masked) instead of being skipped. The moments
 /// and the ray sums take a pass each (with 10 and 9 accumulators, each fits the 16 registers).
 /// One copy per sensor model and ray weighting: with both tests inside the ray pass's loop the
-/// compiler kept five of its nine accumulators on the stack (a load and a store per accumulator
-/// and pixel); the Kinect copy keeps all in registers (the ray pass on a 640 x 480 frame, 6x6
-/// grids: 0.52 -> 0.41 ms, 3x3: 0.57 -> 0.40 ms, medians of alternating runs).
+/// compiler keeps five of its nine accumulators on the stack (a load and a store per accumulator
+/// and pixel); the Kinect copy keeps all in registers.
 template <bool kSpherical, bool kUniformWeight>
 __attribute__((target("avx2,fma"))) void SumFourGridsAvx2(const Eigen::Vector3f* points, int width,
                                                           int x0, int y0, int y1, int k,
@@ -593,8 +591,7 @@ __attribute__((target("avx2,fma"))) void SumFourGridsAvx2(const Eigen::Vector3f*
         zz = _mm256_fmadd_pd(z, z, zz);
       }
     }
-    // Each grid's 16 sums (W zero) in four transposes, not lane by lane through memory (SumGridRow
-    // on TUM frames, 3x3 grids, alternating runs: 1.86 -> 1.65 ms).
+    // Each grid's 16 sums (W zero) in four transposes, not lane by lane through memory.
     double* const out = reinterpret_cast<double*>(sums);
     const std::size_t stride = sizeof(MomentSums) / sizeof(double);
     const __m256d zero = _mm256_setzero_pd();
@@ -741,8 +738,8 @@ void SumGridRow(const Eigen::Vector3f* points, int width, int height, int y0, in
       if (last + 1 >= num_points) break;
       // The same columns of the next band of rows, fetched while this band is summed: when the
       // memory is busy this stage waits on the cloud (12 bytes a pixel), and the hardware
-      // prefetcher, following k rows at once, does not run far enough ahead (grid-fast's moments
-      // stage 1.39 -> 1.20 ms in alternating runs; a band further ahead was slower).
+      // prefetcher, following k rows at once, does not run far enough ahead. One band ahead is
+      // enough; further ahead the lines are evicted before use.
       const std::size_t next_band = static_cast<std::size_t>(y1) * width + x0;
       for (int y = 0; y < y1 - y0; ++y) {
         const std::size_t first = next_band + static_cast<std::size_t>(y) * width;
@@ -751,10 +748,8 @@ void SumGridRow(const Eigen::Vector3f* points, int width, int height, int y0, in
         for (int byte = 0; byte < 12 * 4 * k; byte += 64) __builtin_prefetch(row + byte);
       }
       // The next row's sums of the same four grids, fetched for writing: a store to a line that
-      // is not in the cache waits for it to be read first, and the 4.4 MB of sums of 3x3 grids
-      // are not, a frame later (SumGridRow on TUM frames, 3x3 grids: 1.54 -> 1.30 ms in 6 of 8
-      // alternating runs, 1.69 -> 1.36 ms in 8 of 8 for a first version; two rows ahead was
-      // slower).
+      // is not in the cache waits for it to be read first, and the megabytes of sums of 3x3
+      // grids are not, a frame later. One row ahead: two rows ahead evicts more than it saves.
       if (next_sums != nullptr) {
         const char* line = reinterpret_cast<const char*>(next_sums + cx);
         for (std::size_t b = 0; b < 4 * sizeof(MomentSums); b += 64)

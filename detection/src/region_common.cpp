@@ -91,8 +91,7 @@ int Find(std::vector<int>& parent, int a) {
 
 /// Calls visit(i) for every pixel i of no region (label < 0) 4-adjacent to a pixel of one, in
 /// pixel order. Most pixels have a region: four labels at a time (SSE2) are passed over when none
-/// is negative (TUM frames, grid3: 0.35 ms a frame; pixel by pixel, with a look at each listed
-/// pixel's point for validity, 1.05 ms).
+/// is negative, a third of the time of a pass pixel by pixel.
 template <typename Visit>
 void ForEachUnassignedBesideRegion(const std::vector<std::int32_t>& labels, int width, int height,
                                    const Visit& visit) {
@@ -146,8 +145,7 @@ void ForEachUnassignedBesideRegion(const std::vector<std::int32_t>& labels, int 
 ///    a pixel by the paper's orthogonal distance, gamma + gamma_sigmas sigma_n, so at a crease a
 ///    region takes a strip of the neighbouring surface as wide as the noise; on a narrow or
 ///    grazing plane (a door jamb, a wall seen along) that strip tilts the normal by up to a
-///    degree (synthetic room, Kinect noise: mean normal error of correct planes 0.157 -> 0.064
-///    deg for PBRG, 0.066 -> 0.040 deg for GBRG).
+///    degree under Kinect noise; the competition hands the strip back.
 /// Moved pixels leave and join the region moments and ray sums too, so all that is reported of a
 /// plane describes its final pixels.
 std::vector<RayPlane> FitAlongRays(const datasets::OrganizedCloud& cloud,
@@ -198,9 +196,8 @@ std::vector<RayPlane> FitAlongRays(const datasets::OrganizedCloud& cloud,
       for (const std::int32_t other : around) {
         if (other < 0 || !planes[other].ok) continue;
         // Only into a hole or a notch of the region (two of the four sides or more): a pixel on
-        // its straight rim may be a strip of an undetected surface beside it, which would tilt it
-        // (synthetic rubble, grid3, with one side: mean normal error 0.130 -> 0.136 deg, max
-        // 1.45 -> 2.19 deg; with two 0.138 / 1.58).
+        // its straight rim may be a strip of an undetected surface beside it, which would tilt
+        // it.
         int sides = 0;
         for (const std::int32_t o : around) sides += o == other;
         if (sides < 2) continue;
@@ -226,9 +223,8 @@ std::vector<RayPlane> FitAlongRays(const datasets::OrganizedCloud& cloud,
   // And the pixels of no region beside one (an invalid one is turned away by its depth). Growth and
   // the pixel-level refinement turned them away by their distance to the eigen fit, which on a
   // surface seen at a grazing angle is tilted (see ray_fit): away from it, they are the pixels on
-  // one side of the true plane, and without them the ray fit is tilted too (synthetic room, Kinect
-  // noise, the right wall turned 23 deg, 638 px wide: 155 of its 2298 px, and 2.8 cm off instead of
-  // 0.3 cm).
+  // one side of the true plane, and without them the ray fit is tilted too (most on a narrow
+  // wall seen at a grazing angle, by centimetres).
   ForEachUnassignedBesideRegion(labels, width, height, enqueue);
   std::vector<char> touched(regions.size(), 0);
   std::vector<std::pair<std::size_t, std::int32_t>> moves;
@@ -314,8 +310,8 @@ namespace {
 
 /// Every region's ray sums from a region-index image: runs of one label are summed locally and
 /// flushed when the label changes. A loop of its own, with no call in it, so that the run's nine
-/// sums stay in registers (beside the border scan's calls they lived on the stack: a load and a
-/// store per sum and pixel).
+/// sums stay in registers (beside the border scan's calls they would live on the stack: a load
+/// and a store per sum and pixel).
 template <bool kSpherical>
 void SumRaysByLabel(const datasets::OrganizedCloud& cloud, const std::vector<std::int32_t>& labels,
                     const DetectionParams& params, std::vector<RaySums>& rays) {

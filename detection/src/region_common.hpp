@@ -8,9 +8,9 @@
 #include <emmintrin.h>
 #endif
 
+#include "fast_moments.hpp"
 #include "planeslam/datasets/organized_cloud.hpp"
 #include "planeslam/detection/detection_config.hpp"
-#include "planeslam/detection/fast_moments.hpp"
 #include "planeslam/detection/plane.hpp"
 
 namespace planeslam::detection::internal {
@@ -163,7 +163,7 @@ RegionBorders ScanLabelImage(const datasets::OrganizedCloud& cloud,
 /// not empty) move with their moments. With `label_root`, `labels` is left as it is and the map
 /// from a label l to its merged region, (*label_root)[l + 1], is written there instead (empty
 /// when nothing merged), for FinalizeSegmentation, which rewrites every label anyway: a pass over
-/// a pixel image less (a relabelling of 640 x 480 labels took 0.38 ms on TUM frames).
+/// a pixel image less.
 void MergeCoplanarRegions(std::vector<std::int32_t>& labels,
                           const std::vector<std::uint64_t>& touching_pairs,
                           std::vector<MomentSums>& regions, std::vector<RaySums>& rays,

@@ -10,8 +10,8 @@
 #include <random>
 #include <vector>
 
+#include "fast_moments.hpp"  // private to detection (detection/src)
 #include "planeslam/detection/detection_config.hpp"
-#include "planeslam/detection/fast_moments.hpp"
 #include "planeslam/detection/plane_covariance.hpp"
 
 namespace planeslam::detection {

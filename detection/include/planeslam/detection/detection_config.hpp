@@ -59,15 +59,15 @@ struct DetectionParams {
   bool merge_regions = true;     ///< merge adjacent regions that describe one surface
   double merge_angle_deg = 5.0;  ///< merge: max angle between the two normals [deg]
   /// Merge also regions that do not touch (a surface seen on both sides of an occluder). Off by
-  /// default, as in the paper; on in the Kinect config (TUM fr3 SLAM ATE 1.76 -> 1.29 cm: the
-  /// floor on both sides of the structure becomes one plane) and the simulator's (its ground
-  /// truth counts a split plane as over-segmented).
+  /// default, as in the paper; on in the Kinect config (the floor on both sides of an object on
+  /// it becomes one plane, one landmark for SLAM) and the simulator's (its ground truth counts a
+  /// split plane as over-segmented).
   bool merge_disjoint = false;
   /// Final plane of each region fitted along the rays instead of by the paper's eigen fit
   /// (eq. 3-6): weighted least squares of inverse depth 1/s = (n/d).(p/s) over the region's
   /// pixels. A range sensor errs along the ray, so p/s (the pixel's ray) is exact and only 1/s is
   /// noisy: this fit is unbiased, where the eigen fit of a surface seen at a grazing angle is
-  /// pulled towards the rays by sigma^2 / lambda2 (synthetic room, Kinect noise: up to 1.3 deg).
+  /// pulled towards the rays by sigma^2 / lambda2 (with Kinect noise, by up to a degree or so).
   /// Growth is unchanged (the paper's MSE decides every join).
   bool ray_fit = true;
 

@@ -1,19 +1,21 @@
 #pragma once
-/// Grid-based region growing, GBRG (Xiao et al. 2011, Section III).
+/// Grid-based region growing, GBRG (Xiao et al. 2011, Section III). Detect runs as a pipeline of
+/// stages (detection/src/grid_pipeline.hpp):
 ///
-/// 1. The range image is cut into k x k grids (paper: 3 x 3); per-grid moments K, S, Q are summed
-///    straight from the cloud in one pass (no per-pixel normals).
-/// 2. Each grid is classified from its scatter eigenvalues l1 <= l2 <= l3: K < mu sparse,
-///    l2 <= alpha l3 linear, l1 <= beta l2 planar, else spherical (Section III-A; with the depth
-///    threshold model a grid whose residual is within the sensor noise is planar too).
-/// 3. Seeds are the unassigned planar grids in order of increasing MSE (ties by grid index,
-///    row-major); the order is computed once by sorting (MSE, index) keys, which pops exactly what
-///    the paper's min-heap would, with less work. Under the depth threshold model the key adds
-///    the ray noise leaking through the grid's normal uncertainty (far noisy grids seed last). A
-///    region grows breadth-first over 4-neighbour grids (the grid image's left/right/up/down). 4-
-///    rather than 8-neighbours: a diagonal grid touches the region in one corner pixel only, so it
-///    adds no evidence of continuity, and 8-neighbours leak across thin diagonal edges; every grid
-///    of a 4-connected plane is still reached. A candidate g joins when
+/// 1. Moments and classification. The range image is cut into k x k grids (paper: 3 x 3);
+///    per-grid moments K, S, Q (and the ray sums, for the ray fit) are summed straight from the
+///    cloud in one pass (no per-pixel normals). Each grid is classified from its scatter
+///    eigenvalues l1 <= l2 <= l3: K < mu sparse, l2 <= alpha l3 linear, l1 <= beta l2 planar,
+///    else spherical (Section III-A; with the depth threshold model a grid whose residual is
+///    within the sensor noise is planar too).
+/// 2. Growth. Seeds are the unassigned planar grids in order of increasing MSE (ties by grid
+///    index, row-major); the order is computed once by sorting (MSE, index) keys, which pops
+///    exactly what the paper's min-heap would, with less work. Under the depth threshold model the
+///    key adds the ray noise leaking through the grid's normal uncertainty (far noisy grids seed
+///    last). A region grows breadth-first over 4-neighbour grids (the grid image's left/right/up/
+///    down). 4- rather than 8-neighbours: a diagonal grid touches the region in one corner pixel
+///    only, so it adds no evidence of continuity, and 8-neighbours leak across thin diagonal
+///    edges; every grid of a 4-connected plane is still reached. A candidate g joins when
 ///      n_GR . n_g > cos(eta),  |n_GR . (m_GR - m_g)| < gamma,  MSE(GR u g) < epsilon
 ///    (Algorithm 2 line 8). The merged moments are updated on every join (eq. 5); the plane is
 ///    refitted from them (eq. 6) after every join with refit_interval = 1, as in the paper, or,
@@ -27,10 +29,16 @@
 ///    ceil(theta / k^2) grids are planes; the grids of smaller (uncertain) regions leave G as in
 ///    the paper: they neither seed nor join later regions (their pixels may still be given to a
 ///    plane by the refinement; the grid-level pipeline grows those that fit no plane once more).
-/// 4. Beyond the paper (both optional, on by default): boundary refinement gives each valid pixel
-///    of a grid outside every plane, with a plane among its 8 neighbour grids, to the best-fitting
-///    such plane when |n.p - d| < gamma(z) (with refine_sigmas); then adjacent regions describing
-///    one surface are merged. Final planes are refitted from all their pixels.
+/// 3. Refinement, beyond the paper. The pixel-level refinement (refine_boundary, on by default)
+///    gives each valid pixel of a grid on a plane's edge to the best-fitting plane among its 8
+///    neighbour grids when |n.p - d| < gamma(z) (with refine_sigmas), else to none. The grid-level
+///    pipeline (method grid-fast) moves whole edge grids to the plane that fits them best instead,
+///    again around planes too narrow for an interior fit, and fits each plane to its interior
+///    grids; a plane seen edge-on, as narrow as a grid or two, gets the pixel-level refinement
+///    and a fit of its pixels.
+/// 4. Merging: adjacent (and, with merge_disjoint, disjoint) regions describing one surface are
+///    merged.
+/// 5. Final fit: each plane is refitted from all its pixels (eigen fit, or the ray fit).
 #include <string>
 
 #include "planeslam/detection/detection_config.hpp"
