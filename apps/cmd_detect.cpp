@@ -20,6 +20,7 @@
 #include "planeslam/datasets/image_io.hpp"
 #include "planeslam/datasets/sensor_config.hpp"
 #include "planeslam/datasets/sequence_factory.hpp"
+#include "sensor_profiles.hpp"
 
 namespace planeslam::app {
 namespace {
@@ -135,6 +136,7 @@ class DetectCommand : public Command {
     sub.add_option("--intrinsics", intrinsics_,
                    "camera file for a depth PNG (width height fx fy cx cy depth_scale [flip_y]); "
                    "default: the sensor section");
+    AddSensorOption(sub, sensor_);
     AddConfigOptions(sub, options_);
     sub.footer(
         "Examples:\n"
@@ -150,7 +152,7 @@ class DetectCommand : public Command {
   }
 
   int Run() override {
-    Config config = LoadConfig(options_);
+    Config config = LoadConfigWithProfile(options_, sensor_, input_, "detect");
     auto& section = config.Get<DetectionSection>("detection");
     if (!method_.empty()) section.method = method_;
     if (MaybePrintConfig(options_, config)) return 0;
@@ -267,6 +269,7 @@ class DetectCommand : public Command {
   std::string out_;
   std::string method_;
   std::string intrinsics_;
+  std::string sensor_;
   ConfigOptions options_;
 };
 

@@ -32,6 +32,7 @@
 #include "planeslam/mapping/map_writers.hpp"
 #include "planeslam/mapping/occupancy_map.hpp"
 #include "planeslam/mapping/slam_system.hpp"
+#include "sensor_profiles.hpp"
 #include "trajectory_plots.hpp"
 
 namespace planeslam::app {
@@ -232,6 +233,7 @@ nlohmann::json Score(const ds::Trajectory& ground_truth, const ds::Trajectory& e
 
 /// "ATE rmse ... cm (...)" from Score's metrics.
 std::string AteLine(nlohmann::json metrics) {
+  if (metrics.contains("error")) return "ATE not computed: " + metrics["error"].get<std::string>();
   std::ostringstream os;
   os << "ATE rmse " << metrics["ate"]["rmse"].get<double>() * 100.0 << " cm (SE(3) aligned, "
      << metrics["ate"]["pairs"].get<std::size_t>() << " pairs)";
@@ -343,6 +345,7 @@ class RunCommand : public Command {
                    "output folder (default: output.directory, planeslam_out)");
     sub.add_option("--scene", scene_, "synthetic scene when no SEQUENCE: room, corridor, rubble");
     sub.add_option("--method", method_, "plane detector (default: detection.method)");
+    AddSensorOption(sub, sensor_);
     AddConfigOptions(sub, options_);
     sub.footer(
         "Outputs: trajectory_tum.txt trajectory_kitti.txt plane_map.{ply,obj,json} pose_graph.g2o\n"
@@ -359,12 +362,13 @@ class RunCommand : public Command {
         "Examples:\n"
         "  planeslam run                                    synthetic room with loop closure\n"
         "  planeslam run --scene corridor --out corridor_out\n"
-        "  planeslam run ../shared/data/tum_fr3_structure_notexture_far -c config/tum_fr3.yaml\n"
+        "  planeslam run ../shared/data/tum_fr3_structure_notexture_far   (TUM fr3 profile, "
+        "recognised)\n"
         "  planeslam run scans/ -c config/laser_scan.yaml --set octomap.enabled=false");
   }
 
   int Run() override {
-    Config config = LoadConfig(options_);
+    Config config = LoadConfigWithProfile(options_, sensor_, sequence_, "run");
     if (MaybePrintConfig(options_, config)) return 0;
     ApplyInputLimits(config);
     const RunConfig& run = config.Get<RunConfig>("run");
@@ -431,6 +435,7 @@ class RunCommand : public Command {
   std::string out_dir_;
   std::string scene_;
   std::string method_;
+  std::string sensor_;
   ConfigOptions options_;
 };
 
