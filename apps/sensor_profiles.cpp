@@ -190,16 +190,20 @@ const std::vector<SensorProfile>& SensorProfiles() {
   static const std::vector<SensorProfile> profiles = {
       {"tum-fr3",
        {"config/tum_fr3.yaml", "config/detection_kinect.yaml"},
-       "Kinect profile, half resolution"},
+       "Kinect profile, half resolution",
+       true},
       {"tum-fr1",
        {"config/tum_fr3.yaml", "config/tum_fr1.yaml", "config/detection_kinect.yaml"},
-       "Kinect profile with fr1 intrinsics, half resolution"},
+       "Kinect profile with fr1 intrinsics, half resolution",
+       true},
       {"tum-fr2",
        {"config/tum_fr3.yaml", "config/tum_fr2.yaml", "config/detection_kinect.yaml"},
-       "Kinect profile with fr2 intrinsics, half resolution"},
+       "Kinect profile with fr2 intrinsics, half resolution",
+       true},
       {"icl-nuim",
        {"config/icl_nuim.yaml", "config/detection_kinect.yaml"},
-       "ICL-NUIM camera, Kinect detection profile"},
+       "ICL-NUIM camera, Kinect detection profile",
+       true},
       {"kitti", {"config/kitti_hdl64.yaml"}, "HDL-64E range image"},
       {"laser",
        {"config/laser_scan.yaml", "config/detection_laser.yaml"},
@@ -262,14 +266,76 @@ void ApplyProfile(const ProfileChoice& choice, const std::string& command, Confi
 }
 
 Config LoadConfigWithProfile(const ConfigOptions& options, const std::string& sensor,
-                             const std::string& input, const std::string& command) {
+                             const std::string& input, const std::string& command,
+                             ProfileChoice* chosen) {
   Config config;
   if (!input.empty() || !sensor.empty()) {
-    ApplyProfile(ChooseProfile(sensor, input), command, &config);
+    const ProfileChoice choice = ChooseProfile(sensor, input);
+    ApplyProfile(choice, command, &config);
+    if (chosen != nullptr) *chosen = choice;
   }
   for (const auto& file : options.config_files) config.LoadFile(file);
   for (const auto& assignment : options.overrides) config.Set(assignment);
   return config;
+}
+
+std::string ResolveDepthCamera(const std::string& png, const std::string& intrinsics_option,
+                               const ProfileChoice& profile, datasets::SensorConfig* sensor) {
+  const fs::path path(png);
+  fs::path file = intrinsics_option;
+  std::string source = intrinsics_option + " (--intrinsics)";
+  std::error_code ec;
+  const fs::path dataset = path.parent_path().parent_path();
+  if (file.empty() && fs::is_regular_file(path.parent_path() / "intrinsics.yaml", ec)) {
+    file = path.parent_path() / "intrinsics.yaml";
+    source = file.string() + " (beside the image)";
+  } else if (file.empty() && profile.profile != nullptr && sensor->intrinsics_source == "auto" &&
+             fs::is_regular_file(dataset / "intrinsics.yaml", ec)) {
+    file = dataset / "intrinsics.yaml";
+    source = file.string() + " (the image's dataset folder)";
+  }
+  if (!file.empty()) {
+    const ds::CameraFile camera = ds::ReadCameraFile(file.string());
+    sensor->intrinsics = camera.intrinsics;
+    sensor->depth_scale = camera.depth_scale;
+    sensor->flip_y = false;  // the file's intrinsics already carry the flip (fy < 0)
+    sensor->intrinsics_source = "config";
+    return source;
+  }
+  if (profile.profile != nullptr) {
+    return "the sensor section (--sensor " + profile.profile->name + ", then -c and --set)";
+  }
+  const ds::SensorConfig defaults;
+  const ds::PinholeIntrinsics& k = sensor->intrinsics;
+  const ds::PinholeIntrinsics& d = defaults.intrinsics;
+  if (k.width != d.width || k.height != d.height || k.fx != d.fx || k.fy != d.fy || k.cx != d.cx ||
+      k.cy != d.cy || sensor->depth_scale != defaults.depth_scale ||
+      sensor->flip_y != defaults.flip_y) {
+    return "the sensor section (-c/--set)";
+  }
+  // Nothing names the camera: only the image's size and encoding are left.
+  const ds::Image16 image = ds::ReadPng16(png);
+  std::vector<const SensorProfile*> fits;
+  for (const SensorProfile& p : SensorProfiles()) {
+    Config config;
+    for (const std::string& f : p.files) config.LoadString(ConfigFiles().at(f), f);
+    const auto& camera = config.Get<ds::SensorConfig>("sensor").intrinsics;
+    if (p.depth_camera && camera.width == image.width && camera.height == image.height) {
+      fits.push_back(&p);
+    }
+  }
+  const std::string size = std::to_string(image.width) + "x" + std::to_string(image.height);
+  if (fits.size() == 1) {
+    Config config;
+    for (const std::string& f : fits.front()->files) config.LoadString(ConfigFiles().at(f), f);
+    *sensor = config.Get<ds::SensorConfig>("sensor");
+    return "--sensor " + fits.front()->name + " (the only camera with " + size + " depth images)";
+  }
+  std::string names;
+  for (const SensorProfile* p : fits) names += (names.empty() ? "" : ", ") + p->name;
+  throw IoError(png, "cannot tell which camera took this " + size + " 16-bit depth image" +
+                         (fits.empty() ? "" : " (" + names + " all fit)") +
+                         ": give --intrinsics FILE (or --sensor NAME)");
 }
 
 }  // namespace planeslam::app

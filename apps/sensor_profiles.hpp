@@ -9,6 +9,7 @@
 
 #include "cli_common.hpp"
 #include "config.hpp"
+#include "planeslam/datasets/sensor_config.hpp"
 
 namespace planeslam::app {
 
@@ -17,6 +18,7 @@ struct SensorProfile {
   std::string name;                ///< for --sensor
   std::vector<std::string> files;  ///< "config/<file>.yaml", compiled in
   std::string summary;             ///< e.g. "Kinect profile, half resolution"
+  bool depth_camera = false;       ///< its sensor section is a pinhole depth camera's
 };
 
 /// The profile chosen for an input and why; `profile` is null when none applies.
@@ -45,8 +47,19 @@ void AddSensorOption(CLI::App& sub, std::string& sensor);
 /// chosen and why.
 void ApplyProfile(const ProfileChoice& choice, const std::string& command, Config* config);
 
-/// LoadConfig with the profile of `input` (or of --sensor `sensor`) applied before the -c files.
+/// LoadConfig with the profile of `input` (or of --sensor `sensor`) applied before the -c files;
+/// the choice is stored in `chosen` when given.
 Config LoadConfigWithProfile(const ConfigOptions& options, const std::string& sensor,
-                             const std::string& input, const std::string& command);
+                             const std::string& input, const std::string& command,
+                             ProfileChoice* chosen = nullptr);
+
+/// The camera a single depth PNG is read with, in this order: the --intrinsics file; an
+/// intrinsics.yaml beside the image; the profile chosen for it (its dataset folder's
+/// intrinsics.yaml when the folder has one, else the profile's sensor section); a sensor section
+/// the user's -c or --set changed; the one profile whose camera has the image's size. Sets
+/// `sensor`'s camera keys and returns where they came from; throws IoError naming the image and
+/// the option to give when none of these tells.
+std::string ResolveDepthCamera(const std::string& png, const std::string& intrinsics_option,
+                               const ProfileChoice& profile, datasets::SensorConfig* sensor);
 
 }  // namespace planeslam::app

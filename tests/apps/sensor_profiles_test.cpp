@@ -126,5 +126,41 @@ TEST(SensorProfiles, KittiAndLaserFoldersGetTheirConfigs) {
   EXPECT_NE(r.err.find("no sensor profile"), std::string::npos) << r.err;
 }
 
+// A single depth image: intrinsics.yaml beside it, else a sensor section the user set; where
+// nothing tells the camera, one line naming the option and no output.
+TEST(SensorProfiles, DetectSaysWhichIntrinsicsOrRefuses) {
+  const fs::path dir = ScratchDir();
+  fs::create_directories(dir / "frame");
+  datasets::Image16 depth(320, 240);
+  std::fill(depth.data.begin(), depth.data.end(), 2000);  // 2 m in millimetres
+  const std::string png = (dir / "frame" / "d.png").string();
+  datasets::WritePng16(png, depth);
+  const fs::path out = dir / "out";
+  CliResult r = RunCli("detect " + png + " --out " + out.string(), dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find(png + ": cannot tell which camera took this 320x240 16-bit depth image: "
+                             "give --intrinsics FILE"),
+            std::string::npos)
+      << r.err;
+  EXPECT_FALSE(fs::exists(out));
+
+  std::ofstream(dir / "frame" / "intrinsics.yaml")
+      << "width: 320\nheight: 240\nfx: 262.5\nfy: 262.5\ncx: 159.5\ncy: 119.5\n"
+         "depth_scale: 1000\n";
+  r = RunCli("detect " + png + " --out " + out.string(), dir);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("intrinsics fx 262.5 fy 262.5 cx 159.5 cy 119.5, depth_scale 1000, from " +
+                       (dir / "frame" / "intrinsics.yaml").string() + " (beside the image)"),
+            std::string::npos)
+      << r.err;
+
+  fs::remove(dir / "frame" / "intrinsics.yaml");
+  r = RunCli("detect " + png + " --set sensor.width=320 --set sensor.height=240 --set " +
+                 "sensor.depth_scale=1000 --out " + (dir / "out2").string(),
+             dir);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("from the sensor section (-c/--set)"), std::string::npos) << r.err;
+}
+
 }  // namespace
 }  // namespace planeslam::test
