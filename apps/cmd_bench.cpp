@@ -1,12 +1,11 @@
 // `planeslam bench detect|odometry`: speed and quality of our detectors and odometry against the
 // in-process PCL baselines, on the same frames, in one process.
-#include <nlohmann/json.hpp>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <utility>
 #include <vector>
@@ -20,6 +19,7 @@
 #include "planeslam/datasets/atomic_file.hpp"
 #include "planeslam/datasets/errors.hpp"
 #include "planeslam/datasets/sensor_config.hpp"
+#include "sensor_profiles.hpp"
 #include "svg_plot.hpp"
 
 namespace planeslam::app {
@@ -85,13 +85,16 @@ class BenchCommand : public Command {
     detect_->add_flag("--quality", quality_,
                       "run the quality suite instead: synthetic room/rubble with ground-truth "
                       "labels (Hoover T=0.8) and TUM plane repeatability (k = 1, 5, 15)");
-    detect_->add_option("--quality-frames", quality_options_.synthetic_frames,
-                        "--quality: frames per synthetic sequence")
+    detect_
+        ->add_option("--quality-frames", quality_options_.synthetic_frames,
+                     "--quality: frames per synthetic sequence")
         ->check(CLI::Range(1, 10000));
-    detect_->add_option("--quality-stride", quality_options_.tum_stride,
-                        "--quality: TUM repeatability uses every N-th frame as frame i")
+    detect_
+        ->add_option("--quality-stride", quality_options_.tum_stride,
+                     "--quality: TUM repeatability uses every N-th frame as frame i")
         ->check(CLI::Range(1, 10000));
     AddOmpsOptions(*detect_);
+    AddSensorOption(*detect_, detect_sensor_);
     AddConfigOptions(*detect_, detect_config_);
     detect_->footer(
         "Times are wall-clock per detection, single thread, methods interleaved per repetition.\n"
@@ -104,8 +107,8 @@ class BenchCommand : public Command {
         "  planeslam bench detect depth/1341836537.655691.png --repeat 1\n"
         "  planeslam bench detect --quality --json quality.json --plot plots/");
 
-    odometry_ = sub.add_subcommand("odometry",
-                                   "Frame-to-frame odometry: our plane odometry vs PCL GICP");
+    odometry_ =
+        sub.add_subcommand("odometry", "Frame-to-frame odometry: our plane odometry vs PCL GICP");
     odometry_->add_option("sequence", sequence_, "sequence folder (TUM layout with groundtruth)")
         ->required();
     odometry_->add_option("--out", odometry_options_.out_dir,
@@ -119,6 +122,7 @@ class BenchCommand : public Command {
     odometry_->add_option("--gicp-max-distance", odometry_options_.gicp_max_distance,
                           "GICP max correspondence distance [m]");
     odometry_->add_option("--json", odometry_options_.json_path, "write the results as JSON");
+    AddSensorOption(*odometry_, odometry_sensor_);
     AddConfigOptions(*odometry_, odometry_config_);
     odometry_->footer(
         "Both methods get the same frames and start from a constant-velocity guess; each is timed\n"
@@ -146,8 +150,7 @@ class BenchCommand : public Command {
     app.add_option("--omps-smoothing", omps_.normal_smoothing_size,
                    "pcl_omps normal smoothing size [px]");
     app.add_option("--omps-min-inliers", omps_.min_inliers, "pcl_omps min region size [px]");
-    app.add_option("--omps-angle", omps_.angular_threshold_deg,
-                   "pcl_omps angular threshold [deg]");
+    app.add_option("--omps-angle", omps_.angular_threshold_deg, "pcl_omps angular threshold [deg]");
     app.add_option("--omps-distance", omps_.distance_threshold,
                    "pcl_omps distance threshold [m at 1 m, scaled by z^2]");
     app.add_option("--omps-curvature", omps_.maximum_curvature,
@@ -160,7 +163,8 @@ class BenchCommand : public Command {
   }
 
   int RunDetect() {
-    const Config config = LoadConfig(detect_config_);
+    const Config config = LoadConfigWithProfile(
+        detect_config_, detect_sensor_, frames_.empty() ? "" : frames_.front(), "bench detect");
     if (MaybePrintConfig(detect_config_, config)) return 0;
     const auto& sensor = config.Get<ds::SensorConfig>("sensor");
     std::vector<std::string> skipped;
@@ -168,7 +172,8 @@ class BenchCommand : public Command {
     const std::vector<BenchFrame> frames =
         frames_.empty() ? bench::LoadDefaultFrames(data_dir, sensor, &skipped)
                         : bench::LoadFrames(frames_, sensor, stride_);
-    for (const std::string& s : skipped) std::cerr << "planeslam: note: skipped missing " << s << "\n";
+    for (const std::string& s : skipped)
+      std::cerr << "planeslam: note: skipped missing " << s << "\n";
     if (frames.empty()) {
       throw IoError(data_dir, "no benchmark frames (set PLANESLAM_DATA_DIR or give FRAMES)");
     }
@@ -328,11 +333,16 @@ class BenchCommand : public Command {
     }
     nlohmann::json out = nlohmann::json::array();
     for (const auto& r : records) {
-      nlohmann::json j = {{"method", r.method},         {"frame", r.frame},
-                          {"median_ms", r.median_ms},   {"min_ms", r.min_ms},
-                          {"times_ms", r.times_ms},     {"planes", r.planes},
-                          {"assigned_fraction", r.assigned}, {"valid_points", r.valid_points},
-                          {"width", r.width},           {"height", r.height}};
+      nlohmann::json j = {{"method", r.method},
+                          {"frame", r.frame},
+                          {"median_ms", r.median_ms},
+                          {"min_ms", r.min_ms},
+                          {"times_ms", r.times_ms},
+                          {"planes", r.planes},
+                          {"assigned_fraction", r.assigned},
+                          {"valid_points", r.valid_points},
+                          {"width", r.width},
+                          {"height", r.height}};
       const auto it = pcl.find(r.frame);
       if (it != pcl.end() && r.median_ms > 0.0) j["speedup_vs_pcl"] = it->second / r.median_ms;
       out.push_back(std::move(j));
@@ -364,7 +374,8 @@ class BenchCommand : public Command {
   }
 
   int RunOdometry() {
-    const Config config = LoadConfig(odometry_config_);
+    const Config config =
+        LoadConfigWithProfile(odometry_config_, odometry_sensor_, sequence_, "bench odometry");
     if (MaybePrintConfig(odometry_config_, config)) return 0;
     odometry_options_.quiet = odometry_config_.quiet;
     return bench::RunOdometryBench(sequence_, config, odometry_options_);
@@ -383,10 +394,12 @@ class BenchCommand : public Command {
   bench::QualityOptions quality_options_;
   bench::OmpsSettings omps_;
   ConfigOptions detect_config_;
+  std::string detect_sensor_;
   // odometry
   std::string sequence_;
   bench::OdometryOptions odometry_options_;
   ConfigOptions odometry_config_;
+  std::string odometry_sensor_;
 };
 
 }  // namespace

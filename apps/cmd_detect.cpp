@@ -1,6 +1,7 @@
 // `planeslam detect INPUT --out DIR`: planes of one range image (depth PNG or organized PCD).
 #include <algorithm>
 #include <array>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -20,6 +21,7 @@
 #include "planeslam/datasets/image_io.hpp"
 #include "planeslam/datasets/sensor_config.hpp"
 #include "planeslam/datasets/sequence_factory.hpp"
+#include "sensor_profiles.hpp"
 
 namespace planeslam::app {
 namespace {
@@ -115,6 +117,13 @@ nlohmann::json PlanesJson(const std::string& input, const std::string& method,
   return j;
 }
 
+bool IsPng(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return ext == ".png";
+}
+
 class DetectCommand : public Command {
  public:
   std::string Name() const override { return "detect"; }
@@ -134,7 +143,9 @@ class DetectCommand : public Command {
         ->check(CLI::IsMember(DetectorMethods()));
     sub.add_option("--intrinsics", intrinsics_,
                    "camera file for a depth PNG (width height fx fy cx cy depth_scale [flip_y]); "
-                   "default: the sensor section");
+                   "default: intrinsics.yaml beside the image, else its dataset folder's profile, "
+                   "else the sensor section set by -c/--set");
+    AddSensorOption(sub, sensor_);
     AddConfigOptions(sub, options_);
     sub.footer(
         "Examples:\n"
@@ -150,17 +161,19 @@ class DetectCommand : public Command {
   }
 
   int Run() override {
-    Config config = LoadConfig(options_);
+    ProfileChoice profile;
+    Config config = LoadConfigWithProfile(options_, sensor_, input_, "detect", &profile);
     auto& section = config.Get<DetectionSection>("detection");
     if (!method_.empty()) section.method = method_;
     if (MaybePrintConfig(options_, config)) return 0;
     ds::SensorConfig sensor = config.Get<ds::SensorConfig>("sensor");
-    if (!intrinsics_.empty()) {
-      const ds::CameraFile camera = ds::ReadCameraFile(intrinsics_);
-      sensor.intrinsics = camera.intrinsics;
-      sensor.depth_scale = camera.depth_scale;
-      sensor.flip_y = false;  // the file's intrinsics already carry the flip (fy < 0)
-      sensor.intrinsics_source = "config";
+    if (IsPng(input_)) {
+      const std::string source = ResolveDepthCamera(input_, intrinsics_, profile, &sensor);
+      const ds::PinholeIntrinsics k = sensor.EffectiveIntrinsics();
+      std::fprintf(stderr,
+                   "planeslam detect: intrinsics fx %g fy %g cx %g cy %g, depth_scale %g, from "
+                   "%s\n",
+                   k.fx, k.fy, k.cx, k.cy, sensor.depth_scale, source.c_str());
     }
     const auto detector = MakeDetector(section.method, config);
 
@@ -267,6 +280,7 @@ class DetectCommand : public Command {
   std::string out_;
   std::string method_;
   std::string intrinsics_;
+  std::string sensor_;
   ConfigOptions options_;
 };
 

@@ -1,12 +1,15 @@
 // `planeslam run [SEQUENCE]`: offline plane SLAM over a sequence (or the built-in synthetic room),
 // writing the trajectory, the plane map, the pose graph, an optional OctoMap and, with ground
 // truth, its own scores.
+#include <unistd.h>
+
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 #include <utility>
 #include <vector>
@@ -19,6 +22,7 @@
 #include "config_sections_slam.hpp"
 #include "config_sections_synthetic.hpp"
 #include "detector_factory.hpp"
+#include "exit_codes.hpp"
 #include "interrupt.hpp"
 #include "planeslam/datasets/atomic_file.hpp"
 #include "planeslam/datasets/sequence_factory.hpp"
@@ -28,6 +32,7 @@
 #include "planeslam/mapping/map_writers.hpp"
 #include "planeslam/mapping/occupancy_map.hpp"
 #include "planeslam/mapping/slam_system.hpp"
+#include "sensor_profiles.hpp"
 #include "trajectory_plots.hpp"
 
 namespace planeslam::app {
@@ -41,8 +46,8 @@ double MsSince(Clock::time_point t) {
 }
 
 nlohmann::json StatsJson(const ds::ErrorStatistics& s, std::size_t pairs) {
-  return {{"rmse", s.rmse}, {"mean", s.mean},     {"median", s.median}, {"std", s.std},
-          {"min", s.min},   {"max", s.max},       {"sse", s.sse},       {"pairs", pairs}};
+  return {{"rmse", s.rmse}, {"mean", s.mean}, {"median", s.median}, {"std", s.std},
+          {"min", s.min},   {"max", s.max},   {"sse", s.sse},       {"pairs", pairs}};
 }
 
 /// The sequence `planeslam run` reads and the name it reports it by.
@@ -78,9 +83,20 @@ std::vector<std::size_t> FrameIndices(const RunInput& input, const RunConfig& ru
   return indices;
 }
 
+/// A frame the sequence could not read: where it is and the reader's one-line error.
+struct BadFrame {
+  std::size_t index = 0;
+  double timestamp = 0.0;  ///< [s] from the frame list
+  std::string file;        ///< the file the error names
+  std::string error;       ///< the reader's message, "FILE: reason"
+};
+
 /// What the frame loop collects besides the SLAM system's own state.
 struct FrameLoopLog {
-  std::size_t done = 0;                   ///< frames processed
+  std::size_t done = 0;              ///< frames processed
+  bool interrupted = false;          ///< SIGINT/SIGTERM ended the loop
+  std::vector<BadFrame> bad_frames;  ///< left out (skip) or the one that ended the loop (stop)
+  bool stopped_at_bad_frame = false;
   double time_load = 0, time_detect = 0;  ///< [ms] summed over the frames
   /// Thinned clouds of the keyframes by keyframe id, inserted into the OctoMap at the end with
   /// the optimised keyframe poses.
@@ -95,7 +111,29 @@ void LogFrame(std::size_t index, double timestamp, const mapping::SlamFrameResul
   log << index << "," << ds::FormatRoundTrip(timestamp) << "," << result.keyframe << ","
       << result.planes << "," << result.matches << "," << result.tracked << "," << result.degenerate
       << "," << result.used_point_to_plane << "," << result.loop_closures << "," << result.refused
-      << "\n";
+      << ",ok\n";
+}
+
+/// Loads frame `index`; a frame the sequence cannot read is recorded in `log` (frames.csv row,
+/// warning) and yields nothing. The first frame of the run has nothing to fall back on, so its
+/// error propagates and nothing is written.
+std::optional<ds::Frame> LoadOrRecordBad(const RunInput& input, std::size_t index, bool first,
+                                         const RunConfig& run, FrameLoopLog* log) {
+  try {
+    return input.sequence->Load(index);
+  } catch (const IoError& e) {
+    if (first) throw;
+    BadFrame bad{index, input.sequence->Timestamp(index), e.file(), e.what()};
+    const bool stop = run.on_bad_frame == "stop";
+    std::cerr << (::isatty(STDERR_FILENO) ? "\n" : "")
+              << "planeslam run: " << (stop ? "error" : "warning") << ": frame " << index
+              << (stop ? " stops the run" : " skipped") << ": " << bad.error << "\n";
+    log->frame_log << index << "," << ds::FormatRoundTrip(bad.timestamp) << ",,,,,,,,,"
+                   << (stop ? "stopped" : "skipped") << "\n";
+    log->bad_frames.push_back(std::move(bad));
+    log->stopped_at_bad_frame = stop;
+    return std::nullopt;
+  }
 }
 
 /// Loads, decimates, detects and tracks each frame of `indices` until done or interrupted.
@@ -105,12 +143,18 @@ void ProcessFrames(const RunInput& input, const std::vector<std::size_t>& indice
                    mapping::SlamSystem& slam, FrameLoopLog* log) {
   ProgressBar progress("run", indices.size(), quiet);
   log->frame_log << "index,timestamp,keyframe,planes,matches,tracked,degenerate,point_to_plane,"
-                    "loop_closures,refused\n";
+                    "loop_closures,refused,status\n";
   for (std::size_t i : indices) {
-    if (StopRequested()) break;
+    if (StopRequested()) {
+      log->interrupted = true;
+      break;
+    }
     auto t = Clock::now();
-    ds::Frame frame = input.sequence->Load(i);
+    std::optional<ds::Frame> loaded = LoadOrRecordBad(input, i, i == indices.front(), run, log);
     log->time_load += MsSince(t);
+    if (log->stopped_at_bad_frame) break;
+    if (!loaded) continue;
+    ds::Frame& frame = *loaded;
     t = Clock::now();
     if (run.decimation > 1) frame.cloud = ds::Decimate(frame.cloud, run.decimation);
     const detection::Segmentation segmentation = detector.Detect(frame.cloud);
@@ -189,6 +233,7 @@ nlohmann::json Score(const ds::Trajectory& ground_truth, const ds::Trajectory& e
 
 /// "ATE rmse ... cm (...)" from Score's metrics.
 std::string AteLine(nlohmann::json metrics) {
+  if (metrics.contains("error")) return "ATE not computed: " + metrics["error"].get<std::string>();
   std::ostringstream os;
   os << "ATE rmse " << metrics["ate"]["rmse"].get<double>() * 100.0 << " cm (SE(3) aligned, "
      << metrics["ate"]["pairs"].get<std::size_t>() << " pairs)";
@@ -202,14 +247,25 @@ struct FinishTimes {
   double wall_seconds = 0.0;
 };
 
-nlohmann::json SummaryJson(const std::string& input_name, bool interrupted,
-                           const mapping::SlamSystem& slam,
+nlohmann::json BadFramesJson(const std::vector<BadFrame>& bad_frames) {
+  nlohmann::json list = nlohmann::json::array();
+  for (const BadFrame& b : bad_frames) {
+    list.push_back(
+        {{"index", b.index}, {"timestamp", b.timestamp}, {"file", b.file}, {"error", b.error}});
+  }
+  return list;
+}
+
+nlohmann::json SummaryJson(const std::string& input_name, const mapping::SlamSystem& slam,
                            const mapping::PoseGraphResult& final_optimization,
                            const FrameLoopLog& log, const FinishTimes& times) {
   const mapping::SlamStats& stats = slam.stats();
   return {{"input", input_name},
           {"frames", log.done},
-          {"interrupted", interrupted},
+          {"interrupted", log.interrupted},
+          {"skipped_frames", log.stopped_at_bad_frame ? 0 : log.bad_frames.size()},
+          {"stopped_at_bad_frame", log.stopped_at_bad_frame},
+          {"bad_frames", BadFramesJson(log.bad_frames)},
           {"keyframes", stats.keyframes},
           {"loop_closures", stats.loop_closures},
           {"loop_candidates", stats.loop_candidates},
@@ -238,15 +294,18 @@ nlohmann::json SummaryJson(const std::string& input_name, bool interrupted,
           {"frames_per_second", log.done / std::max(times.wall_seconds, 1e-9)}};
 }
 
-void PrintReport(bool interrupted, const mapping::SlamSystem& slam, const FrameLoopLog& log,
-                 const FinishTimes& times, const std::string& ate_line,
-                 const std::string& out_dir) {
+void PrintReport(const mapping::SlamSystem& slam, const FrameLoopLog& log, const FinishTimes& times,
+                 const std::string& ate_line, const std::string& out_dir) {
   const mapping::SlamStats& stats = slam.stats();
   const std::size_t done = log.done;
+  const char* prefix = log.interrupted ? "INTERRUPTED: outputs cover the frames processed: "
+                       : log.stopped_at_bad_frame
+                           ? "STOPPED AT A BAD FRAME: outputs cover the frames "
+                             "before it: "
+                           : "";
   std::printf("%s%zu frames (%.1f frames/s), %zu keyframes, %zu loop closures, %zu map planes\n",
-              interrupted ? "INTERRUPTED: outputs cover the frames processed: " : "", done,
-              done / std::max(times.wall_seconds, 1e-9), stats.keyframes, stats.loop_closures,
-              slam.map().size());
+              prefix, done, done / std::max(times.wall_seconds, 1e-9), stats.keyframes,
+              stats.loop_closures, slam.map().size());
   std::printf(
       "degenerate frames %zu (filled by point-to-plane alignment: %zu), untracked frames %zu "
       "(refused by the prior gate: %zu)\n",
@@ -255,6 +314,11 @@ void PrintReport(bool interrupted, const mapping::SlamSystem& slam, const FrameL
   std::printf("loop candidates %zu, refused: degenerate %zu, few matches %zu, residual %zu\n",
               stats.loop_candidates, stats.loop_refused_degenerate, stats.loop_refused_matches,
               stats.loop_refused_residual);
+  if (!log.bad_frames.empty() && !log.stopped_at_bad_frame) {
+    std::printf("SKIPPED %zu unreadable frame(s):", log.bad_frames.size());
+    for (const BadFrame& b : log.bad_frames) std::printf(" %zu", b.index);
+    std::printf(" (see summary.json)\n");
+  }
   std::printf("%s\n", ate_line.c_str());
   std::printf(
       "time per frame [ms]: load %.2f detect %.2f track %.2f map %.2f loop %.2f; "
@@ -277,24 +341,34 @@ class RunCommand : public Command {
     sub.add_option("SEQUENCE", sequence_,
                    "TUM or ICL-NUIM folder, folder of organized .pcd, or KITTI .bin folder; "
                    "omitted: the synthetic scene of the 'simulation' config section");
-    sub.add_option("-o,--out", out_dir_, "output folder (default: output.directory, planeslam_out)");
+    sub.add_option("-o,--out", out_dir_,
+                   "output folder (default: output.directory, planeslam_out)");
     sub.add_option("--scene", scene_, "synthetic scene when no SEQUENCE: room, corridor, rubble");
     sub.add_option("--method", method_, "plane detector (default: detection.method)");
+    AddSensorOption(sub, sensor_);
     AddConfigOptions(sub, options_);
     sub.footer(
         "Outputs: trajectory_tum.txt trajectory_kitti.txt plane_map.{ply,obj,json} pose_graph.g2o\n"
-        "         octomap.bt (octomap.enabled) config.yaml summary.json frames.csv, and with ground truth metrics.json + "
+        "         octomap.bt (octomap.enabled) config.yaml summary.json frames.csv, and with "
+        "ground truth metrics.json + "
         "plots/*.svg\n"
-        "Ctrl-C stops after the current frame and writes the outputs of the frames done.\n\n"
+        "Ctrl-C stops after the current frame and writes the outputs of the frames done.\n"
+        "A frame that cannot be read (corrupt, truncated or missing file) is left out with a "
+        "warning\n"
+        "(run.on_bad_frame: skip) or ends the run there (stop); a bad first frame is an error.\n"
+        "Exit codes: 0 success; 2 error, nothing written; 5 completed with skipped frames;\n"
+        "            6 stopped at a bad frame; 130 interrupted (5, 6, 130: outputs of the frames "
+        "done).\n\n"
         "Examples:\n"
         "  planeslam run                                    synthetic room with loop closure\n"
         "  planeslam run --scene corridor --out corridor_out\n"
-        "  planeslam run ../shared/data/tum_fr3_structure_notexture_far -c config/tum_fr3.yaml\n"
+        "  planeslam run ../shared/data/tum_fr3_structure_notexture_far   (TUM fr3 profile, "
+        "recognised)\n"
         "  planeslam run scans/ -c config/laser_scan.yaml --set octomap.enabled=false");
   }
 
   int Run() override {
-    Config config = LoadConfig(options_);
+    Config config = LoadConfigWithProfile(options_, sensor_, sequence_, "run");
     if (MaybePrintConfig(options_, config)) return 0;
     ApplyInputLimits(config);
     const RunConfig& run = config.Get<RunConfig>("run");
@@ -323,7 +397,6 @@ class RunCommand : public Command {
     const auto wall_start = Clock::now();
     ProcessFrames(input, indices, run, *detector, want_octomap ? &octomap_config : nullptr,
                   options_.quiet, slam, &log);
-    const bool interrupted = log.done < indices.size();
     if (log.done == 0) {
       throw IoError(input.name, "interrupted before the first frame: nothing written");
     }
@@ -347,13 +420,14 @@ class RunCommand : public Command {
       ate_line = AteLine(metrics);
     }
     times.write_ms = MsSince(t);
-    nlohmann::json summary =
-        SummaryJson(input.name, interrupted, slam, final_optimization, log, times);
+    nlohmann::json summary = SummaryJson(input.name, slam, final_optimization, log, times);
     if (!metrics.is_null()) summary["metrics"] = metrics;
     ds::WriteFileAtomic(out_dir + "/summary.json", summary.dump(2) + "\n");
     if (!metrics.is_null()) ds::WriteFileAtomic(out_dir + "/metrics.json", metrics.dump(2) + "\n");
-    PrintReport(interrupted, slam, log, times, ate_line, out_dir);
-    return interrupted ? 130 : 0;
+    PrintReport(slam, log, times, ate_line, out_dir);
+    if (log.interrupted) return kExitInterrupted;
+    if (log.stopped_at_bad_frame) return kExitStoppedAtBadFrame;
+    return log.bad_frames.empty() ? kExitSuccess : kExitSkippedFrames;
   }
 
  private:
@@ -361,6 +435,7 @@ class RunCommand : public Command {
   std::string out_dir_;
   std::string scene_;
   std::string method_;
+  std::string sensor_;
   ConfigOptions options_;
 };
 

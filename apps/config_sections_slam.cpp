@@ -83,6 +83,10 @@ void VisitRun(FieldVisitor& v, RunConfig& c) {
           1, 16);
   v.Field("ate_max_time_difference", c.ate_max_time_difference,
           "[s] evo's association window when scoring against ground truth", 0.0, 10.0);
+  v.Field("on_bad_frame", c.on_bad_frame,
+          "a frame that cannot be read (corrupt, truncated or missing file): skip = warn, leave it "
+          "out and carry on (exit 5); stop = end the run there, keeping the frames done (exit 6)",
+          {"skip", "stop"});
 }
 
 PLANESLAM_REGISTER_CONFIG_SECTION(mapping::SlamConfig, "slam",

@@ -1,6 +1,5 @@
 // planeslam: one executable, git-style subcommands (see command_registry.hpp).
 #include <CLI/CLI.hpp>
-
 #include <algorithm>
 #include <exception>
 #include <iostream>
@@ -8,10 +7,12 @@
 #include <new>
 
 #include "command_registry.hpp"
+#include "exit_codes.hpp"
 #include "planeslam/datasets/errors.hpp"
 
 int main(int argc, char** argv) {
   using planeslam::app::Command;
+  namespace exit_code = planeslam::app;
   CLI::App app{
       "planeslam: fast plane detection and plane-based SLAM on range images\n"
       "(depth cameras, organized laser scans, LiDAR)."};
@@ -46,16 +47,16 @@ int main(int argc, char** argv) {
     }
   } catch (const planeslam::IoError& e) {
     std::cerr << "planeslam: error: " << e.what() << "\n";
-    return 2;
+    return exit_code::kExitError;
   } catch (const planeslam::ConfigError& e) {
     std::cerr << "planeslam: config error: " << e.what() << "\n";
-    return 2;
+    return exit_code::kExitError;
   } catch (const std::bad_alloc&) {
     std::cerr << "planeslam: error: out of memory\n";
-    return 3;
+    return exit_code::kExitOutOfMemory;
   } catch (const std::exception& e) {
     std::cerr << "planeslam: internal error: " << e.what() << "\n";
-    return 4;
+    return exit_code::kExitInternalError;
   }
   return 1;
 }

@@ -122,10 +122,16 @@ TEST(TumSequence, NearestStampAssociationWithinTolerance) {
   EXPECT_FLOAT_EQ(f.cloud.at(0, 0).x(), -1.5f / 5.0f);
 }
 
+// A missing file is a bad frame: the sequence opens, the other frames load, and loading that one
+// names the list and line.
 TEST(TumSequence, MissingListedFileNamesFileAndLine) {
   const auto dir = MakeTumFolder(test::ScratchDir(), {"1.0", "2.0", "3.0"}, {});
   fs::remove(dir / "depth" / "2.0.png");
-  const std::string msg = ErrorOf([&] { OpenSequence(dir.string(), SensorConfig{}); });
+  const auto seq = OpenSequence(dir.string(), SensorConfig{});
+  ASSERT_EQ(seq->Size(), 3u);
+  EXPECT_NO_THROW(seq->Load(0));
+  EXPECT_NO_THROW(seq->Load(2));
+  const std::string msg = ErrorOf([&] { seq->Load(1); });
   EXPECT_EQ(msg, (dir / "depth.txt").string() + ":4: names 'depth/2.0.png' which does not exist");
 }
 
@@ -284,7 +290,8 @@ TEST(IclSequence, MissingDepthNamesLine) {
   IclScene scene;
   const auto dir = MakeIclFolder(test::ScratchDir(), &scene);
   fs::remove(dir / "depth" / "1.png");
-  EXPECT_EQ(ErrorOf([&] { OpenSequence(dir.string(), SensorConfig{}); }),
+  const auto seq = OpenSequence(dir.string(), SensorConfig{});
+  EXPECT_EQ(ErrorOf([&] { seq->Load(1); }),
             (dir / "associations.txt").string() + ":2: names 'depth/1.png' which does not exist");
 }
 

@@ -84,6 +84,11 @@ Frame DepthImageSequence::Load(std::size_t index) const {
   frame.timestamp = item.timestamp;
   frame.source = item.path;
   frame.T_world_sensor_gt = item.T_world_sensor_gt;
+  std::error_code ec;
+  if (!item.list.empty() && !fs::is_regular_file(item.path, ec)) {
+    throw IoError(item.list, item.list_line,
+                  "names '" + item.list_entry + "' which does not exist");
+  }
   projector_.Project(ReadPng16(item.path), &frame.cloud, item.path);
   return frame;
 }
@@ -117,21 +122,20 @@ std::string FolderName(const std::string& folder) {
   return p.filename().string();
 }
 
-// Resolves every listed file against the folder; the first one missing is reported with its line.
+// Resolves every listed file against the folder. A file that is missing is a bad frame, reported
+// when it is loaded, so that one missing file does not refuse the whole sequence.
 std::vector<DepthImageSequence::Item> ResolveFiles(const std::vector<FrameListEntry>& entries,
                                                    const fs::path& folder,
                                                    const std::string& list_name) {
   std::vector<DepthImageSequence::Item> items;
   items.reserve(entries.size());
   for (const FrameListEntry& e : entries) {
-    const fs::path path = folder / e.file;
-    std::error_code ec;
-    if (!fs::is_regular_file(path, ec)) {
-      throw IoError(list_name, e.line, "names '" + e.file + "' which does not exist");
-    }
     DepthImageSequence::Item item;
     item.timestamp = e.timestamp;
-    item.path = path.string();
+    item.path = (folder / e.file).string();
+    item.list = list_name;
+    item.list_line = static_cast<long>(e.line);
+    item.list_entry = e.file;
     items.push_back(std::move(item));
   }
   return items;

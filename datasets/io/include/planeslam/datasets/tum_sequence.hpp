@@ -41,6 +41,9 @@ class DepthImageSequence : public Sequence {
     double timestamp = 0.0;
     std::string path;  ///< absolute or relative to the working directory
     std::optional<Pose> T_world_sensor_gt;
+    std::string list;        ///< the frame list that names the file (for messages)
+    long list_line = 0;      ///< its line there
+    std::string list_entry;  ///< the file as the list spells it
   };
 
   DepthImageSequence(std::string name, std::vector<Item> items, const PinholeIntrinsics& intrinsics,
@@ -65,7 +68,8 @@ class DepthImageSequence : public Sequence {
   double depth_scale_;
 };
 
-/// Opens a TUM RGB-D folder: depth.txt (every listed file must exist, checked now), intrinsics
+/// Opens a TUM RGB-D folder: depth.txt (a listed file that is missing makes Load of that frame
+/// throw IoError(depth.txt, line, ...), a bad frame like an unreadable PNG), intrinsics
 /// from the folder's intrinsics.yaml when present and config.intrinsics_source is "auto" (else
 /// config.intrinsics, depth_scale, flip_y), groundtruth.txt (optional) associated by nearest stamp
 /// within config.gt_max_time_difference. Throws IoError naming the file (and line).
