@@ -1,4 +1,5 @@
 #include "bench_odometry.hpp"
+#include "exit_codes.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -368,7 +369,7 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
   const PlaneMethod ours = MakePlaneMethod(config, options);
 
   BenchRuns runs;
-  if (!TrackSequence(*sequence, n, ours, options, &runs)) return 130;
+  if (!TrackSequence(*sequence, n, ours, options, &runs)) return kExitInterrupted;
   const SecondInFrames second = OneSecondDelta(runs.ours.trajectory);
   EvaluateRuns(sequence_path, second.frames, &runs);
 

@@ -1,4 +1,5 @@
 #include "bench_quality.hpp"
+#include "exit_codes.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -323,11 +324,11 @@ int RunQualitySuite(const std::vector<Method>& methods, const Config& config,
                                  {ds::SceneKind::kRubble, "pinhole"},
                                  {ds::SceneKind::kRubble, "spherical"}};
   for (const SyntheticCase& c : cases) {
-    if (!EvaluateSyntheticCase(c, methods, config, options, &results)) return 130;
+    if (!EvaluateSyntheticCase(c, methods, config, options, &results)) return kExitInterrupted;
   }
   const fs::path tum = fs::path(options.data_dir) / "tum_fr3_structure_notexture_far";
   if (fs::is_directory(tum)) {
-    if (!EvaluateTumRepeatability(tum, methods, config, options, &results)) return 130;
+    if (!EvaluateTumRepeatability(tum, methods, config, options, &results)) return kExitInterrupted;
   } else {
     std::cerr << "planeslam: note: " << tum.string()
               << " not found, TUM repeatability skipped (set PLANESLAM_DATA_DIR)\n";

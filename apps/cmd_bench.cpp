@@ -10,6 +10,7 @@
 #include <utility>
 #include <vector>
 
+#include "exit_codes.hpp"
 #include "bench_common.hpp"
 #include "bench_odometry.hpp"
 #include "bench_quality.hpp"
@@ -189,7 +190,7 @@ class BenchCommand : public Command {
       // Interleave the methods within each repetition, so background load affects all alike.
       for (int r = 0; r < repeat_; ++r) {
         for (std::size_t m = 0; m < methods.size(); ++m) {
-          if (StopRequested()) return 130;
+          if (StopRequested()) return kExitInterrupted;
           detection::Segmentation seg;
           per[m].times_ms.push_back(bench::TimedDetect(methods[m], frame.cloud, &seg));
           AddStageTimes(seg, per[m]);

@@ -6,6 +6,7 @@
 #include <iostream>
 #include <string>
 
+#include "exit_codes.hpp"
 #include "cli_common.hpp"
 #include "command_registry.hpp"
 #include "config_sections_synthetic.hpp"
@@ -103,7 +104,7 @@ class SimulateCommand : public Command {
                     seconds, 1000.0 * seconds / std::max<std::size_t>(1, summary.frames));
       std::cout << line << "preview    " << summary.preview_path << "\n";
     }
-    return summary.frames < sequence->Size() ? 130 : 0;
+    return summary.frames < sequence->Size() ? kExitInterrupted : kExitSuccess;
   }
 
  private:

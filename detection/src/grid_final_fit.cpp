@@ -14,11 +14,6 @@ struct FinalFitWork {
   std::vector<std::int32_t> grid_ids;    ///< each grid's plane id (pixel labels = their grid's)
 };
 
-FinalFitWork& ThreadFinalFitWork() {
-  thread_local FinalFitWork work;
-  return work;
-}
-
 }  // namespace
 
 // Each band of k rows is written once: a row of grid values expanded to pixels, appended once
@@ -29,7 +24,7 @@ FinalFitWork& ThreadFinalFitWork() {
 void ExpandToPixels(const GridImage& image, const CellMoments& cells,
                     const std::int32_t* grid_values, std::vector<std::int32_t>& pixels) {
   const int k = image.k, width = image.width, height = image.height;
-  std::vector<std::int32_t>& row = ThreadFinalFitWork().row_labels;
+  std::vector<std::int32_t>& row = internal::ThreadScratch<FinalFitWork>().row_labels;
   pixels.clear();
   pixels.reserve(static_cast<std::size_t>(width) * height);
   row.resize(width);
@@ -84,7 +79,7 @@ void FinalFit(const GridImage& image, const CellMoments& cells, bool grid_labels
                                  borders.pixels, image.params, out, fit_sums, fit_rays, label_root);
   if (!grid_labels) return;
   // out.labels holds each grid's plane id: expand it to the pixels.
-  std::vector<std::int32_t>& grid_ids = ThreadFinalFitWork().grid_ids;
+  std::vector<std::int32_t>& grid_ids = internal::ThreadScratch<FinalFitWork>().grid_ids;
   grid_ids.swap(out.labels);
   ExpandToPixels(image, cells, grid_ids.data(), out.labels);
   if (!fits) return;

@@ -31,11 +31,6 @@ struct GrowthWork {
   std::vector<FastFit> fits;                ///< the planes as grown (second growth)
 };
 
-GrowthWork& ThreadGrowthWork() {
-  thread_local GrowthWork work;
-  return work;
-}
-
 /// The region being grown: its moments, plane, and the uncertainty of its normal.
 struct GrowingRegion {
   MomentSums sums;
@@ -326,7 +321,7 @@ void GrowLeftOut(const GridImage& image, CellMoments& cells, Regions& regions, G
 
 // Seeds in order of grid MSE, breadth-first over 4-neighbours.
 void GrowRegions(const GridImage& image, CellMoments& cells, Regions& regions) {
-  GrowthWork& work = ThreadGrowthWork();
+  GrowthWork& work = internal::ThreadScratch<GrowthWork>();
   const int num_cells = image.num_cells;
   regions.cell_region.assign(num_cells, -1);
   work.mark.resize(num_cells);

@@ -244,11 +244,6 @@ void FinishRowSums(const GridImage& image, CellMoments& cells, std::size_t row, 
   }
 }
 
-ClassifyBatch& ThreadBatch() {
-  thread_local ClassifyBatch batch;
-  return batch;
-}
-
 }  // namespace
 
 // Per-grid moments K, S, Q (10 sums) and the ray sums of a row of grids at a time, while its
@@ -260,7 +255,7 @@ double ComputeCellMoments(const GridImage& image, CellMoments& cells) {
   Prepare(image, cells);
   const DetectionParams& params = image.params;
   const SimdKernel kernel = FastestSimdKernel();
-  ClassifyBatch& batch = ThreadBatch();
+  ClassifyBatch& batch = internal::ThreadScratch<ClassifyBatch>();
   batch.Resize();
   Classifier classifier(image, cells, batch, kernel);
   std::size_t num_partly_valid = 0;

@@ -35,11 +35,6 @@ struct NarrowWork {
   std::vector<float> block_ratio;  ///< per candidate
 };
 
-NarrowWork& ThreadNarrowWork() {
-  thread_local NarrowWork work;
-  return work;
-}
-
 /// A plane too narrow for its grids apart from the other planes as well (a column of grids or
 /// two, each next to another plane) holds another surface's pixels in most of its grids: fitted
 /// to all of them it is tilted towards that surface, and labelled with grids that hold as much
@@ -437,7 +432,7 @@ void RefineNarrowPlanes(const GridImage& image, const CellMoments& cells, Region
 // kNarrowRefinePoints, is refined pixel by pixel.
 void FitGridPlanes(const GridImage& image, const CellMoments& cells, const EdgeGrids& edges,
                    Regions& regions, GridFits& fits) {
-  NarrowWork& work = ThreadNarrowWork();
+  NarrowWork& work = internal::ThreadScratch<NarrowWork>();
   fits.pixel_overrides.clear();
   FitInteriorGrids(image, cells, edges, regions, fits);
   // The narrow planes only (most frames have none).

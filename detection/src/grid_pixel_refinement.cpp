@@ -17,11 +17,6 @@ struct PixelRefinementWork {
   std::vector<std::pair<std::size_t, int>> moved_pixels;
 };
 
-PixelRefinementWork& ThreadPixelWork() {
-  thread_local PixelRefinementWork work;
-  return work;
-}
-
 /// Each valid pixel of an edge grid goes to the best-fitting candidate plane (its own and the 8
 /// neighbours') when within its tolerance, else to none. Interior grids keep all their pixels.
 /// Candidate planes are the ones grown (fixed during the pass, so the result does not depend on
@@ -219,7 +214,8 @@ class PixelRefiner {
 
 void RefinePixels(const GridImage& image, const CellMoments& cells, const EdgeGrids& edges,
                   Regions& regions, std::vector<std::int32_t>& labels) {
-  PixelRefiner refiner(image, cells, regions, labels, ThreadPixelWork());
+  PixelRefiner refiner(image, cells, regions, labels,
+                       internal::ThreadScratch<PixelRefinementWork>());
   const int k = image.k, width = image.width;
   const std::size_t num_edge = edges.grids.size();
   for (std::size_t e = 0; e < num_edge; ++e) {

@@ -38,11 +38,6 @@ struct GridRefinementWork {
   std::vector<std::uint8_t> at_narrow_plane;    ///< per grid: in or next to a narrow plane
 };
 
-GridRefinementWork& ThreadRefinementWork() {
-  thread_local GridRefinementWork work;
-  return work;
-}
-
 /// Grid-level refinement: each edge grid goes whole to the adjacent plane (of its 8 neighbours)
 /// that fits it best within tolerance (GridFitRatio); a grid of a plane only when that fits it
 /// better than its own. This undoes grids that joined a plane only because they lie within its
@@ -247,7 +242,7 @@ void FindEdgeGrids(const GridImage& image, const CellMoments& cells,
 // grids move.
 void RefineGrids(const GridImage& image, const CellMoments& cells, Regions& regions,
                  EdgeGrids& edges) {
-  GridRefiner refiner(image, cells, regions, ThreadRefinementWork());
+  GridRefiner refiner(image, cells, regions, internal::ThreadScratch<GridRefinementWork>());
   if (regions.sums.empty() || !refiner.RefineEdgeGrids(edges, false)) return;
   FindEdgeGrids(image, cells, regions.cell_region, edges);
   for (int pass = 0; pass < kNarrowPasses; ++pass) {

@@ -26,11 +26,6 @@ struct Workspace {
   gbrg::GridFits fits;
 };
 
-Workspace& ThreadWorkspace() {
-  thread_local Workspace ws;
-  return ws;
-}
-
 }  // namespace
 
 std::vector<std::string> GridParams::Validate() const {
@@ -72,7 +67,7 @@ Segmentation GridRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) co
   out.cells_y = image.cells_y;
   out.cell_size = image.k;
   if (image.num_cells == 0) return out;
-  Workspace& ws = ThreadWorkspace();
+  Workspace& ws = internal::ThreadScratch<Workspace>();
   // Without the pixel-level refinement every valid pixel keeps its grid's label (the ray fit then
   // moves no pixel at a crease either): region borders, merging and plane ids are worked out on
   // the grid image (k^2 times fewer labels), and the pixel labels written once, at the end.

@@ -26,11 +26,6 @@ struct Workspace {
   std::vector<std::pair<int, int>> stolen;  ///< (point, previous region) of this growth
 };
 
-Workspace& ThreadWorkspace() {
-  thread_local Workspace ws;
-  return ws;
-}
-
 /// A seed: the point, its window neighbours within delta, and their moments and plane.
 struct Seed {
   std::size_t s = 0;
@@ -354,7 +349,7 @@ Segmentation PointRegionGrowing::Detect(const datasets::OrganizedCloud& cloud) c
   out.width = width;
   out.height = height;
   if (cloud.points.empty()) return out;
-  Workspace& ws = ThreadWorkspace();
+  Workspace& ws = internal::ThreadScratch<Workspace>();
   PbrgPass pass(cloud, params_, point_, &ws);
 
   const auto t0 = Clock::now();

@@ -15,6 +15,14 @@
 
 namespace planeslam::detection::internal {
 
+/// This thread's instance of a detector's scratch buffers of type T, kept across frames so that
+/// a warmed-up detector allocates nothing per frame.
+template <class T>
+T& ThreadScratch() {
+  thread_local T scratch;
+  return scratch;
+}
+
 /// Depth used by the noise model: z for a pinhole camera, range for a spherical scanner.
 inline float PointDepth(const Eigen::Vector3f& p, bool spherical) {
   return spherical ? p.norm() : p.z();
