@@ -24,6 +24,7 @@
 #include "detector_factory.hpp"
 #include "exit_codes.hpp"
 #include "interrupt.hpp"
+#include "kitti_report.hpp"
 #include "planeslam/datasets/atomic_file.hpp"
 #include "planeslam/datasets/sequence_factory.hpp"
 #include "planeslam/datasets/trajectory_eval.hpp"
@@ -418,6 +419,9 @@ class RunCommand : public Command {
     if (log.ground_truth.size() >= 3) {
       metrics = Score(log.ground_truth, estimate, run, out_dir);
       ate_line = AteLine(metrics);
+      if (!metrics.contains("error")) {
+        AddKittiErrors(sequence_, log.ground_truth, estimate, &metrics, &ate_line);
+      }
     }
     times.write_ms = MsSince(t);
     nlohmann::json summary = SummaryJson(input.name, slam, final_optimization, log, times);

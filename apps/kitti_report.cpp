@@ -81,4 +81,24 @@ std::optional<ds::KittiOdometryResult> KittiErrors(const ds::Trajectory& ground_
   return ds::EvaluateKittiOdometry(gt, est);
 }
 
+void AddKittiErrors(const std::string& sequence_path, const ds::Trajectory& ground_truth,
+                    const ds::Trajectory& estimate, nlohmann::json* metrics, std::string* report) {
+  if (!HasKittiGroundTruth(sequence_path)) return;
+  const auto kitti = KittiErrors(ground_truth, estimate);
+  if (!kitti) return;
+  if (!kitti->ok) {
+    (*metrics)["kitti"] = {{"error", kitti->message}};
+    *report += "\nKITTI segment errors: " + kitti->message;
+    return;
+  }
+  (*metrics)["kitti"] = KittiErrorsJson(*kitti);
+  char line[160];
+  std::snprintf(line, sizeof(line),
+                "\nKITTI segment errors: translation %.4f %%, rotation %.4f deg/100m (%zu "
+                "segments, path %.1f m)",
+                kitti->TranslationPercent(), kitti->RotationDegPer100m(), kitti->segments.size(),
+                kitti->path_length);
+  *report += line;
+}
+
 }  // namespace planeslam::app

@@ -26,4 +26,10 @@ bool HasKittiGroundTruth(const std::string& sequence_path);
 std::optional<datasets::KittiOdometryResult> KittiErrors(const datasets::Trajectory& ground_truth,
                                                          const datasets::Trajectory& estimate);
 
+/// For `run`: when the sequence's ground truth is KITTI-style, adds "kitti" to `metrics` (the
+/// errors, or {"error": why not}) and the two summary lines to `report`.
+void AddKittiErrors(const std::string& sequence_path, const datasets::Trajectory& ground_truth,
+                    const datasets::Trajectory& estimate, nlohmann::json* metrics,
+                    std::string* report);
+
 }  // namespace planeslam::app
