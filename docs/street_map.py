@@ -1,12 +1,13 @@
 #!/usr/bin/env python3
-"""Top view of a `planeslam run` plane map as a PNG (docs/img/street_map.png).
+"""Top view of a plane map as a PNG (docs/img/street_map.png).
 
-Usage: street_map.py RUN_DIR OUT_PNG [WIDTH]
+Usage: street_map.py DIR OUT_PNG [WIDTH]
 
-Reads RUN_DIR/plane_map.json and RUN_DIR/trajectory_tum.txt. Planes are drawn in their map
-colours seen from above: near-horizontal planes (road, sidewalks) filled and faded, the others
-(facades, kerbs, cars) as their outlines' footprints; the estimated trajectory in black.
-Standard library only (zlib for the PNG)."""
+DIR is a `planeslam run` output (plane_map.json and trajectory_tum.txt: the map and the estimated
+trajectory) or a `planeslam simulate street` folder (planes.json and poses.txt: the ground-truth
+planes and route). Planes are drawn seen from above: near-horizontal planes (road, sidewalks)
+filled and faded, the others (facades, kerbs, cars) as their outlines' footprints; the trajectory
+in black. Standard library only (zlib for the PNG)."""
 import json
 import pathlib
 import struct
@@ -32,12 +33,22 @@ def main():
         sys.exit(__doc__)
     run = pathlib.Path(sys.argv[1])
     width = int(sys.argv[3]) if len(sys.argv) > 3 else 900
-    planes = json.loads((run / "plane_map.json").read_text())["planes"]
     track = []
-    for line in (run / "trajectory_tum.txt").read_text().splitlines():
-        v = line.split()
-        if len(v) == 8:
-            track.append((float(v[1]), float(v[2])))
+    if (run / "plane_map.json").exists():
+        planes = json.loads((run / "plane_map.json").read_text())["planes"]
+        for line in (run / "trajectory_tum.txt").read_text().splitlines():
+            v = line.split()
+            if len(v) == 8:
+                track.append((float(v[1]), float(v[2])))
+    else:
+        planes = json.loads((run / "planes.json").read_text())["planes"]
+        for p in planes:
+            h = (p["id"] * 2654435761) & 0xFFFFFF
+            p["color"] = [40 + (h & 0x9F), 40 + ((h >> 8) & 0x9F), 40 + ((h >> 16) & 0x9F)]
+        for line in (run / "poses.txt").read_text().splitlines():
+            v = line.split()
+            if len(v) == 12:
+                track.append((float(v[3]), float(v[7])))
     xs = [p[0] for pl in planes for poly in pl["polygons"] for p in poly] + [t[0] for t in track]
     ys = [p[1] for pl in planes for poly in pl["polygons"] for p in poly] + [t[1] for t in track]
     x0, x1, y0, y1 = min(xs) - 5, max(xs) + 5, min(ys) - 5, max(ys) + 5
