@@ -344,7 +344,8 @@ class RunCommand : public Command {
                    "omitted: the synthetic scene of the 'simulation' config section");
     sub.add_option("-o,--out", out_dir_,
                    "output folder (default: output.directory, planeslam_out)");
-    sub.add_option("--scene", scene_, "synthetic scene when no SEQUENCE: room, corridor, rubble");
+    sub.add_option("--scene", scene_,
+                   "synthetic scene when no SEQUENCE: room, corridor, rubble, street");
     sub.add_option("--method", method_, "plane detector (default: detection.method)");
     AddSensorOption(sub, sensor_);
     AddConfigOptions(sub, options_);
