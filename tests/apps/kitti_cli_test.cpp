@@ -108,12 +108,12 @@ TEST(KittiCli, EvalKittiPrintsDevkitSegmentErrors) {
   EXPECT_TRUE(Contains(t.out, expected)) << t.out;
 }
 
-/// A street driven with one scan every 10 m (1 Hz) over 120 m: run and bench odometry print and
+/// A street driven with one scan every 10 m (1 Hz) over 110 m: run and bench odometry print and
 /// store the segment errors of the 100 m segments.
 TEST(KittiCli, RunAndBenchReportSegmentErrors) {
   const fs::path dir = ScratchDir();
   const fs::path street = dir / "street";
-  const CliResult sim = RunCli("simulate street -q --frames 13 --set simulation.rate=1 --out " +
+  const CliResult sim = RunCli("simulate street -q --frames 12 --set simulation.rate=1 --out " +
                                    street.string(),
                                dir);
   ASSERT_EQ(sim.exit_code, 0) << sim.err;
