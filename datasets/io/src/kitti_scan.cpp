@@ -212,15 +212,30 @@ std::optional<Pose> ReadVeloToCam(const fs::path& calib) {
 std::unique_ptr<FileSequence> OpenKittiFolder(const std::string& folder,
                                               const SensorConfig& config) {
   config.ValidateOrThrow();
-  auto files = ListFrameFiles(folder, ".bin");
-  if (files.empty()) throw IoError(folder, "no .bin files in folder");
-  const fs::path dir(folder);
   std::error_code ec;
+  fs::path dir = fs::path(folder).lexically_normal();
+  if (dir.filename().empty()) dir = dir.parent_path();
+  // The scans: the folder's velodyne/ (a KITTI sequence folder) or the folder itself; the
+  // sequence's files (times.txt, poses.txt, calib.txt) sit beside velodyne/.
+  fs::path scans = dir;
+  if (fs::is_directory(dir / "velodyne", ec)) {
+    scans = dir / "velodyne";
+  } else if (dir.filename() == "velodyne" && dir.has_parent_path()) {
+    dir = dir.parent_path();
+  }
+  auto files = ListFrameFiles(scans.string(), ".bin");
+  if (files.empty()) throw IoError(scans.string(), "no .bin files in folder");
 
   std::vector<std::optional<Pose>> gt;
   std::string poses_path = config.lidar_poses_file;
   if (poses_path.empty() && fs::exists(dir / "poses.txt", ec))
     poses_path = (dir / "poses.txt").string();
+  // KITTI's own tree: dataset/sequences/NN/ with the ground truth in dataset/poses/NN.txt.
+  const fs::path kitti_poses =
+      dir.parent_path().parent_path() / "poses" / (dir.filename().string() + ".txt");
+  if (poses_path.empty() && dir.parent_path().filename() == "sequences" &&
+      fs::is_regular_file(kitti_poses, ec))
+    poses_path = kitti_poses.string();
   if (!poses_path.empty()) {
     const Trajectory poses = ReadKittiTrajectory(poses_path);
     const auto velo_to_cam = ReadVeloToCam(dir / "calib.txt");
@@ -270,10 +285,8 @@ std::unique_ptr<FileSequence> OpenKittiFolder(const std::string& folder,
       stamps.push_back(times[n]);
     }
   }
-  fs::path p = dir.lexically_normal();
-  if (p.filename().empty()) p = p.parent_path();
   return std::make_unique<FileSequence>(
-      p.filename().string(), std::move(files),
+      dir.filename().string(), std::move(files),
       [config](const std::string& path) { return ReadKittiRangeImage(path, config); },
       std::move(gt), std::move(stamps));
 }
