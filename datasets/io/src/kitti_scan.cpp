@@ -32,9 +32,9 @@ int ElevationRow(double elevation, const SensorConfig& config) {
 }  // namespace
 
 std::vector<LidarPoint> ParseKittiScan(const std::string& bytes, const std::string& name) {
-  if (bytes.empty()) throw IoError(name, "empty scan");
+  if (bytes.empty()) throw IoError(name, "empty scan (0 bytes)");
   if (bytes.size() % 16 != 0) {
-    throw IoError(name, "size " + std::to_string(bytes.size()) +
+    throw IoError(name, "truncated or not a KITTI scan: size " + std::to_string(bytes.size()) +
                             " bytes is not a multiple of 16 (float32 x y z reflectance per point)");
   }
   const std::size_t n = bytes.size() / 16;
@@ -44,6 +44,20 @@ std::vector<LidarPoint> ParseKittiScan(const std::string& bytes, const std::stri
   std::vector<LidarPoint> points(n);
   // Vector4f is 4 packed floats (16 bytes, no padding).
   std::memcpy(static_cast<void*>(points.data()), bytes.data(), bytes.size());
+  // A KITTI scan lists returns only: a NaN or infinite coordinate is a corrupt file, and a scan
+  // whose points all sit at the origin holds no return.
+  bool any_return = false;
+  for (std::size_t i = 0; i < n; ++i) {
+    const LidarPoint& p = points[i];
+    if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || !std::isfinite(p.z())) {
+      throw IoError(name, "point " + std::to_string(i) + " of " + std::to_string(n) +
+                              " has a NaN or infinite coordinate (corrupt scan)");
+    }
+    any_return = any_return || p.x() != 0.0f || p.y() != 0.0f || p.z() != 0.0f;
+  }
+  if (!any_return) {
+    throw IoError(name, "empty scan: all " + std::to_string(n) + " points are at the origin");
+  }
   return points;
 }
 

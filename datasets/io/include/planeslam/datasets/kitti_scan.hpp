@@ -16,7 +16,8 @@ namespace planeslam::datasets {
 using LidarPoint = Eigen::Vector4f;
 
 /// Parses a KITTI .bin held in memory. Throws IoError naming `name` when the size is not a multiple
-/// of 16 bytes, the scan is empty, or it holds more points than the input limits allow.
+/// of 16 bytes (truncated), the scan is empty (no bytes, or every point at the origin), a point has
+/// a NaN or infinite coordinate, or it holds more points than the input limits allow.
 std::vector<LidarPoint> ParseKittiScan(const std::string& bytes, const std::string& name);
 /// Reads a KITTI .bin file (see ParseKittiScan).
 std::vector<LidarPoint> ReadKittiScan(const std::string& path);
