@@ -100,7 +100,7 @@ TEST(StreetRoute, LoopLengthSpeedAndScannerHeight) {
   EXPECT_LT(closest, 1.0);
 }
 
-/// Noise-free scans agree with the brute-force intersection on every 9th ray, on a straight and
+/// Noise-free scans agree with the brute-force intersection on every 13th ray, on a straight and
 /// in a turn.
 TEST(RotatingLidar, MatchesBruteForce) {
   SyntheticConfig config = Street(0);
@@ -115,7 +115,7 @@ TEST(RotatingLidar, MatchesBruteForce) {
     const Pose T = *frame.frame.T_world_sensor_gt;
     int compared = 0;
     for (int r = 0; r < lidar.Height(); ++r) {
-      for (int c = r % 9; c < lidar.Width(); c += 9) {
+      for (int c = r % 13; c < lidar.Width(); c += 13) {
         const std::size_t i = static_cast<std::size_t>(r) * lidar.Width() + c;
         const RayHit hit =
             IntersectScene(seq.scene(), T.translation(), T.linear() * lidar.RayDirection(r, c));
@@ -128,7 +128,7 @@ TEST(RotatingLidar, MatchesBruteForce) {
         ++compared;
       }
     }
-    EXPECT_GT(compared, 8000);
+    EXPECT_GT(compared, 5000);
   }
 }
 
