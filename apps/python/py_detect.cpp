@@ -24,13 +24,77 @@ struct Detection {
   std::vector<std::pair<std::string, double>> timings_ms;
 };
 
+/// A detector configured from the arguments of detect(), kept for the next call with the same
+/// arguments (a C++ caller keeps its detector too; building one parses the profile's YAML and
+/// allocates the detector's buffers anew).
+struct Configured {
+  ds::SensorConfig sensor;
+  std::unique_ptr<const detection::PlaneDetector> detector;
+};
+
+/// What identifies a configuration: method, sensor, and each config entry (a dict by its JSON,
+/// a file by its path, size and modification time, so an edited file is read again).
+std::string ConfigKey(const py::object& method, const py::object& config,
+                      const py::object& sensor) {
+  const py::module_ os = py::module_::import("os");
+  const py::module_ json = py::module_::import("json");
+  std::string key = py::repr(method).cast<std::string>() + "|" +
+                    py::repr(sensor).cast<std::string>();
+  const bool many = py::isinstance<py::list>(config) || py::isinstance<py::tuple>(config);
+  py::list entries = many ? py::list(config) : py::list();
+  if (!many && !config.is_none()) entries.append(config);
+  for (const py::handle& entry : entries) {
+    if (py::isinstance<py::dict>(entry)) {
+      key += "|" + json.attr("dumps")(entry, py::arg("sort_keys") = true).cast<std::string>();
+    } else if (py::isinstance<py::str>(entry) || py::hasattr(entry, "__fspath__")) {
+      const py::object path = os.attr("fspath")(entry);
+      key += "|" + py::str(path).cast<std::string>();
+      try {
+        const py::object st = os.attr("stat")(path);
+        key += ":" + py::str(st.attr("st_size")).cast<std::string>() + ":" +
+               py::str(st.attr("st_mtime_ns")).cast<std::string>();
+      } catch (const py::error_already_set&) {
+        // A missing file: MakeConfig reports it.
+      }
+    } else {
+      key += "|?";  // MakeConfig rejects it
+    }
+  }
+  return key;
+}
+
+/// The configured detector for these arguments, built on first use (a few kept, most recent
+/// first). Called with the GIL held, which guards the cache.
+std::shared_ptr<const Configured> GetConfigured(const py::object& method, const py::object& config,
+                                                const py::object& sensor) {
+  static std::vector<std::pair<std::string, std::shared_ptr<const Configured>>> cache;
+  const std::string key = ConfigKey(method, config, sensor);
+  for (std::size_t i = 0; i < cache.size(); ++i) {
+    if (cache[i].first == key) {
+      std::rotate(cache.begin(), cache.begin() + i, cache.begin() + i + 1);
+      return cache.front().second;
+    }
+  }
+  app::Config cfg = MakeConfig(config, sensor);
+  auto& section = cfg.Get<app::DetectionSection>("detection");
+  if (!method.is_none()) {
+    if (!py::isinstance<py::str>(method)) throw std::invalid_argument("method: expected a str");
+    section.method = method.cast<std::string>();
+  }
+  auto configured = std::make_shared<Configured>();
+  configured->sensor = cfg.Get<ds::SensorConfig>("sensor");
+  configured->detector = app::MakeDetector(section.method, cfg);
+  cache.insert(cache.begin(), {key, configured});
+  if (cache.size() > 8) cache.pop_back();
+  return configured;
+}
+
 /// A configured detector and the inputs of one call.
 struct DetectJob {
   FrameArray in;
   std::optional<Camera> camera;
   double depth_scale = 5000.0;
-  ds::SensorConfig sensor;
-  std::unique_ptr<detection::PlaneDetector> detector;
+  std::shared_ptr<const Configured> configured;
 };
 
 DetectJob PrepareJob(const py::handle& depth, const py::object& intrinsics, double depth_scale,
@@ -44,14 +108,7 @@ DetectJob PrepareJob(const py::handle& depth, const py::object& intrinsics, doub
     throw std::invalid_argument("intrinsics: a depth image needs (fx, fy, cx, cy)");
   }
   job.depth_scale = depth_scale;
-  app::Config cfg = MakeConfig(config, sensor);
-  auto& section = cfg.Get<app::DetectionSection>("detection");
-  if (!method.is_none()) {
-    if (!py::isinstance<py::str>(method)) throw std::invalid_argument("method: expected a str");
-    section.method = method.cast<std::string>();
-  }
-  job.sensor = cfg.Get<ds::SensorConfig>("sensor");
-  job.detector = app::MakeDetector(section.method, cfg);
+  job.configured = GetConfigured(method, config, sensor);
   return job;
 }
 
@@ -60,8 +117,8 @@ detection::Segmentation RunJob(DetectJob& job, std::uint16_t* labels, std::size_
                                std::size_t* assigned) {
   thread_local CloudMaker maker;
   thread_local ds::OrganizedCloud cloud;
-  maker.Make(job.in, job.camera, job.depth_scale, job.sensor, &cloud);
-  detection::Segmentation seg = job.detector->Detect(cloud);
+  maker.Make(job.in, job.camera, job.depth_scale, job.configured->sensor, &cloud);
+  detection::Segmentation seg = job.configured->detector->Detect(cloud);
   std::size_t v = 0, a = 0;
   for (std::size_t i = 0; i < cloud.size(); ++i) {
     const bool ok = cloud.IsValid(i);
@@ -87,7 +144,7 @@ Detection Detect(const py::handle& depth, const py::object& intrinsics, double d
     seg = RunJob(job, labels, &result.valid_pixels, &result.assigned_pixels);
   }
   result.planes = std::move(seg.planes);
-  result.method = job.detector->Name();
+  result.method = job.configured->detector->Name();
   result.timings_ms = std::move(seg.timings_ms);
   return result;
 }
@@ -118,7 +175,7 @@ py::dict BenchDetectCpp(const py::handle& depth, const py::object& intrinsics, d
   py::dict out;
   out["median_ms"] = median;
   out["times_ms"] = times;
-  out["method"] = job.detector->Name();
+  out["method"] = job.configured->detector->Name();
   return out;
 }
 

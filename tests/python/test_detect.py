@@ -88,6 +88,9 @@ def test_config_dict_and_file_apply_like_set_and_c(tum_dir, tmp_path):
     from_file = planeslam.detect(depth, k, config=[str(yaml)])
     assert coarse.method == from_file.method == "grid8"
     assert np.array_equal(coarse.labels, from_file.labels)
+    # The configured detector is kept between calls, but an edited file is read again.
+    yaml.write_text("grid:\n  cell_size: 10\n")
+    assert planeslam.detect(depth, k, config=str(yaml)).method == "grid10"
     assert planeslam.detect(depth, k).method == "grid3"
 
 
