@@ -120,6 +120,27 @@ def test_gil_is_released_while_detecting(tum_dir):
     assert advanced > 1000
 
 
+def test_threads_share_the_detector(tum_dir):
+    seq, depth = first_tum_frame(tum_dir)
+    k = seq.intrinsics
+    serial = planeslam.detect(depth, k, sensor="tum-fr3")
+    results = []
+
+    def work():
+        for _ in range(2):
+            results.append(planeslam.detect(depth, k, sensor="tum-fr3"))
+
+    threads = [threading.Thread(target=work) for _ in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(results) == 6
+    for r in results:
+        assert np.array_equal(r.labels, serial.labels)
+        assert [p.d for p in r.planes] == [p.d for p in serial.planes]
+
+
 BAD_INPUTS = [
     ("3-D of the wrong shape", lambda d: np.zeros((480, 640, 4), np.float32), "(H, W, 3)"),
     ("3-D uint16", lambda d: np.zeros((480, 640, 3), np.uint16), "(H, W, 3)"),
