@@ -8,6 +8,7 @@
 #include "config_sections_mapping.hpp"
 #include "detector_factory.hpp"
 #include "exit_codes.hpp"
+#include "kitti_report.hpp"
 #include "planeslam/datasets/atomic_file.hpp"
 #include "planeslam/datasets/trajectory_eval.hpp"
 #include "planeslam/datasets/trajectory_io.hpp"
@@ -191,6 +192,9 @@ std::string RunSession::Write(const std::string& out_dir) {
   if (ground_truth_.size() >= 3) {
     metrics = Score(ground_truth_, estimate, run_config(), out_dir);
     ate_line = AteLine(metrics);
+    if (!metrics.contains("error")) {
+      AddKittiErrors(input_name_, ground_truth_, estimate, &metrics, &ate_line);
+    }
   }
   write_ms_ = MsSince(t);
   const mapping::SlamStats& stats = slam_->stats();
