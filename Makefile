@@ -11,7 +11,8 @@ RUN_ARGS ?=
 # Debian 12 packages the build needs (PCL without recommends: about a minute instead of many).
 DEB_PACKAGES := build-essential cmake ccache pkg-config libeigen3-dev libceres-dev liboctomap-dev \
   libpcl-dev libyaml-cpp-dev libgtest-dev libgmock-dev libcli11-dev libpng-dev zlib1g-dev \
-  nlohmann-json3-dev clang libclang-rt-14-dev python3
+  nlohmann-json3-dev clang libclang-rt-14-dev python3 \
+  pybind11-dev python3-dev python3-numpy python3-pytest
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 SAN_BUILD_DIR ?= build-asan
@@ -44,7 +45,8 @@ test: build
 # off to keep the build short). The same build carries the libFuzzer targets.
 sanitize: deps
 	CC=clang CXX=clang++ cmake -S . -B $(SAN_BUILD_DIR) -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-	  -DPLANESLAM_SANITIZERS="address;undefined" -DPLANESLAM_WITH_PCL=OFF -DPLANESLAM_BUILD_FUZZERS=ON
+	  -DPLANESLAM_SANITIZERS="address;undefined" -DPLANESLAM_WITH_PCL=OFF -DPLANESLAM_BUILD_FUZZERS=ON \
+	  -DPLANESLAM_BUILD_PYTHON=OFF
 	cmake --build $(SAN_BUILD_DIR) -j$(JOBS)
 	cd $(SAN_BUILD_DIR) && ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
 	  ctest --output-on-failure -j$(JOBS)
