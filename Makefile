@@ -8,10 +8,12 @@ JOBS ?= 2
 CMAKE_ARGS ?=
 RUN_ARGS ?=
 
-# Debian 12 packages the build needs (PCL without recommends: about a minute instead of many).
+# Debian 12 packages the build needs (PCL without recommends: about a minute instead of many);
+# parallel, slurm-wlm and munge: planeslam batch and its tests.
 DEB_PACKAGES := build-essential cmake ccache pkg-config libeigen3-dev libceres-dev liboctomap-dev \
   libpcl-dev libyaml-cpp-dev libgtest-dev libgmock-dev libcli11-dev libpng-dev zlib1g-dev \
-  nlohmann-json3-dev clang libclang-rt-14-dev python3
+  nlohmann-json3-dev clang libclang-rt-14-dev python3 \
+  parallel slurm-wlm munge
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 SAN_BUILD_DIR ?= build-asan
