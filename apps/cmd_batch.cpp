@@ -91,6 +91,15 @@ class BatchCommand : public Command {
   }
 
   int Run() override {
+    try {
+      return Dispatch();
+    } catch (const fs::filesystem_error& e) {
+      throw IoError(e.path1().string(), e.code().message());
+    }
+  }
+
+ private:
+  int Dispatch() {
     if (collect_->parsed()) return Collect(collect_dir_);
     if (job_->parsed()) {
       return RunBatchJob(fs::absolute(job_dir_).string(), job_name_, job_time_limit_, job_command_);
@@ -99,6 +108,7 @@ class BatchCommand : public Command {
     BatchPlan plan = LoadBatchManifest(manifest_);
     if (!time_limit_.empty()) plan.time_limit_s = ParseTimeLimit(time_limit_, "--time-limit");
     if (out_.empty()) throw ConfigError("batch: --out DIR is required");
+    if ((print_ || wait_) && !slurm_) throw ConfigError("batch: --print and --wait go with --slurm");
     const std::string dir = fs::absolute(out_).lexically_normal().string();
     const std::string binary = SelfBinary();
     std::vector<std::size_t> pending;
@@ -130,7 +140,6 @@ class BatchCommand : public Command {
     return failures == 0 ? kExitSuccess : kExitError;
   }
 
- private:
   static std::string Footer() {
     return "Manifest (paths relative to it; each job runs planeslam run SEQUENCE [--sensor P] "
            "[-c F]... [--set K=V]...):\n"
