@@ -278,7 +278,7 @@ void ComparePlot(const std::string& path, const std::string& title, const std::s
   SvgPlot plot(title, "sequence", y_label);
   const int sequences = static_cast<int>(plan.sequences.size());
   const int variants = static_cast<int>(plan.variants.size());
-  const int width = std::max(560, 60 * sequences * variants + 240);
+  const int width = std::max(560, 45 * sequences * variants + 240);
   plot.SetSize(width, 400);
   std::vector<std::string> names;
   for (const auto& s : plan.sequences) names.push_back(s.name);
