@@ -164,7 +164,7 @@ nlohmann::json AttemptRecord(const std::string& name, const std::vector<std::str
   if (r.timed_out) {
     std::ostringstream os;
     os << "time limit of " << r.time_limit_s << " s exceeded";
-    error = os.str() + (error.empty() ? "" : "; last line: " + error);
+    error = os.str();
   }
   j["error"] = j["status"] == "ok" ? "" : error;
   return j;

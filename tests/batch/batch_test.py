@@ -255,6 +255,40 @@ def test_corrupt_sequence(planeslam, data, work, refs):
     check_collect(planeslam, out_dir, good, bad)
 
 
+def test_outdated(planeslam, manifest, out_dir):
+    """A variant whose settings changed: its jobs are outdated and rerun, the others kept."""
+    text = manifest.read_text()
+    manifest.write_text(text.replace("run.decimation: 2", "run.decimation: 3"))
+    stamps = {n: os.stat(out_dir / n / "job.json").st_mtime_ns for n in complete_jobs(out_dir)}
+    r = run([planeslam, "batch", manifest, "--out", out_dir, "--dry-run"])
+    outdated = sorted(line.split(" ")[0] for line in r.stdout.splitlines() if "[outdated]" in line)
+    check(outdated == [f"{s}/decimated" for s in sorted(SCENES)],
+          f"changed settings: the variant's jobs are outdated: {outdated}")
+    r = run([planeslam, "batch", manifest, "--out", out_dir, "--jobs", "2"])
+    check(r.returncode == 0 and "6 complete, 3 to run" in r.stdout, "changed settings: 3 rerun")
+    kept = [n for n in stamps if not n.endswith("/decimated")]
+    check(all(os.stat(out_dir / n / "job.json").st_mtime_ns == stamps[n] for n in kept),
+          "changed settings: the other six untouched")
+    check(all(read_json(out_dir / f"{s}/decimated/job.json")["args"][-1] == "run.decimation=3"
+              for s in SCENES), "changed settings: the rerun jobs hold the new settings")
+    manifest.write_text(text)
+
+
+def test_time_limit(planeslam, work):
+    """A job over its time limit is stopped, recorded as timed out, and keeps no folder."""
+    manifest = work / "slow.yaml"
+    manifest.write_text("sequences:\n  - scene: rubble\nset: {octomap.enabled: false}\n"
+                        "time_limit: '0:02'\n")
+    out_dir = work / "slow"
+    start = time.time()
+    r = run([planeslam, "batch", manifest, "--out", out_dir, "--jobs", "1"])
+    rec = out_dir / ".batch" / "failed" / "rubble" / "default" / "job.json"
+    j = read_json(rec) if rec.exists() else {}
+    check(r.returncode == 2 and j.get("status") == "timed_out" and
+          "time limit of 2 s exceeded" in j.get("error", "") and not (out_dir / "rubble/default").exists(),
+          f"time limit: stopped after 2 s and recorded ({time.time() - start:.1f} s): {j.get('error')}")
+
+
 def mode_parallel(planeslam, work):
     if not shutil.which("parallel"):
         skip("GNU parallel is not installed (Debian package parallel)")
@@ -272,8 +306,8 @@ def mode_parallel(planeslam, work):
     r = run([planeslam, "batch", manifest, "--out", out_dir, "--jobs", "2"])
     check(r.returncode == 0 and "9 complete, 0 to run" in r.stdout,
           "a second run of a complete batch runs nothing")
-    for d in ("killed", "interrupted", "corrupt"):
-        shutil.rmtree(work / d, ignore_errors=True)
+    test_outdated(planeslam, manifest, out_dir)
+    test_time_limit(planeslam, work)
     test_kill_and_rerun(planeslam, manifest, work / "killed", refs)
     test_interrupt(planeslam, manifest, work / "interrupted")
     test_corrupt_sequence(planeslam, data, work, refs)
