@@ -88,7 +88,10 @@ std::string FindOnPath(const std::string& name) {
 
 std::string JobCommandLine(const std::string& binary, const std::string& batch_dir,
                            const BatchJob& job, double time_limit_s) {
+  // The light job wrapper built beside planeslam, else planeslam's own `batch job`.
+  const std::string runner = (fs::path(binary).parent_path() / "planeslam-batch-job").string();
   std::vector<std::string> line = {binary, "batch", "job", batch_dir, job.name};
+  if (::access(runner.c_str(), X_OK) == 0) line = {runner, batch_dir, job.name};
   if (time_limit_s > 0.0) {
     std::ostringstream os;
     os << time_limit_s;

@@ -1,7 +1,8 @@
 #pragma once
 /// Dispatch of a batch's jobs by existing engines: GNU parallel on this machine, a Slurm job array
-/// on a cluster. Both execute the same line per job, `planeslam batch job DIR NAME -- planeslam
-/// run ARGS` (batch_job.hpp), so a job behaves alike wherever it runs.
+/// on a cluster. Both execute the same line per job, `planeslam-batch-job DIR NAME -- planeslam
+/// run ARGS` (batch_job.hpp; `planeslam batch job` when that executable is not beside planeslam),
+/// so a job behaves alike wherever it runs.
 #include <cstddef>
 #include <string>
 #include <vector>
