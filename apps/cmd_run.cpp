@@ -32,6 +32,7 @@
 #include "planeslam/mapping/map_writers.hpp"
 #include "planeslam/mapping/occupancy_map.hpp"
 #include "planeslam/mapping/slam_system.hpp"
+#include "report.hpp"
 #include "sensor_profiles.hpp"
 #include "trajectory_plots.hpp"
 
@@ -139,7 +140,7 @@ std::optional<ds::Frame> LoadOrRecordBad(const RunInput& input, std::size_t inde
 /// Loads, decimates, detects and tracks each frame of `indices` until done or interrupted.
 void ProcessFrames(const RunInput& input, const std::vector<std::size_t>& indices,
                    const RunConfig& run, const detection::PlaneDetector& detector,
-                   const mapping::OccupancyMapConfig* octomap, bool quiet,
+                   std::optional<double> keyframe_voxel, bool quiet,
                    mapping::SlamSystem& slam, FrameLoopLog* log) {
   ProgressBar progress("run", indices.size(), quiet);
   log->frame_log << "index,timestamp,keyframe,planes,matches,tracked,degenerate,point_to_plane,"
@@ -163,10 +164,9 @@ void ProcessFrames(const RunInput& input, const std::vector<std::size_t>& indice
         slam.ProcessFrame(frame.timestamp, frame.cloud, segmentation);
     if (frame.T_world_sensor_gt) log->ground_truth.Add(frame.timestamp, *frame.T_world_sensor_gt);
     LogFrame(i, frame.timestamp, result, log->frame_log);
-    if (octomap != nullptr && result.keyframe) {
-      log->keyframe_clouds.emplace_back(
-          static_cast<std::int64_t>(slam.stats().keyframes - 1),
-          mapping::VoxelDownsample(frame.cloud.points, octomap->downsample_voxel));
+    if (keyframe_voxel && result.keyframe) {
+      log->keyframe_clouds.emplace_back(static_cast<std::int64_t>(slam.stats().keyframes - 1),
+                                        mapping::VoxelDownsample(frame.cloud.points, *keyframe_voxel));
     }
     progress.Update(++log->done);
   }
@@ -186,6 +186,9 @@ void WriteMapOutputs(const std::string& out_dir, const mapping::SlamSystem& slam
   mapping::WriteG2o(slam.graph(), out_dir + "/pose_graph.g2o");
   ds::WriteFileAtomic(out_dir + "/config.yaml", config.ToYaml(true));
   ds::WriteFileAtomic(out_dir + "/frames.csv", log.frame_log.str());
+  if (!log.ground_truth.empty()) {
+    ds::WriteTumTrajectory(out_dir + "/ground_truth_tum.txt", log.ground_truth);
+  }
 }
 
 /// The keyframes' thinned clouds inserted at their optimised poses, written as octomap.bt.
@@ -329,6 +332,21 @@ void PrintReport(const mapping::SlamSystem& slam, const FrameLoopLog& log, const
   std::printf("outputs in %s/\n", out_dir.c_str());
 }
 
+/// keyframe_cloud.pcd and report.html, written last from the output files; a failure there leaves
+/// the other outputs standing and is reported as a warning.
+void WriteReportOrWarn(const std::string& out_dir, const mapping::SlamSystem& slam,
+                       const FrameLoopLog& log, const ReportConfig& report) {
+  try {
+    if (report.cloud_points > 0 && !log.keyframe_clouds.empty()) {
+      WriteKeyframeCloud(out_dir + "/keyframe_cloud.pcd", log.keyframe_clouds, slam.KeyframePoses(),
+                         static_cast<std::size_t>(report.cloud_points));
+    }
+    WriteRunReport(out_dir, static_cast<std::size_t>(report.cloud_points));
+  } catch (const std::exception& e) {
+    std::cerr << "planeslam run: warning: report.html not written: " << e.what() << "\n";
+  }
+}
+
 class RunCommand : public Command {
  public:
   std::string Name() const override { return "run"; }
@@ -345,6 +363,7 @@ class RunCommand : public Command {
                    "output folder (default: output.directory, planeslam_out)");
     sub.add_option("--scene", scene_, "synthetic scene when no SEQUENCE: room, corridor, rubble");
     sub.add_option("--method", method_, "plane detector (default: detection.method)");
+    sub.add_flag("--no-report", no_report_, "do not write report.html (as report.enabled: false)");
     AddSensorOption(sub, sensor_);
     AddConfigOptions(sub, options_);
     sub.footer(
@@ -352,6 +371,8 @@ class RunCommand : public Command {
         "         octomap.bt (octomap.enabled) config.yaml summary.json frames.csv, and with "
         "ground truth metrics.json + "
         "plots/*.svg\n"
+        "         + ground_truth_tum.txt; report.html + keyframe_cloud.pcd (report.enabled, "
+        "--no-report: off)\n"
         "Ctrl-C stops after the current frame and writes the outputs of the frames done.\n"
         "A frame that cannot be read (corrupt, truncated or missing file) is left out with a "
         "warning\n"
@@ -389,14 +410,19 @@ class RunCommand : public Command {
     const mapping::OccupancyMapConfig& octomap_config =
         config.Get<mapping::OccupancyMapConfig>("octomap");
     const bool want_octomap = octomap_config.enabled && mapping::OccupancyMapBuilder::available();
+    const ReportConfig& report = config.Get<ReportConfig>("report");
+    const bool want_report = report.enabled && !no_report_;
+    if (want_report && !ReportAvailable()) std::cerr << "planeslam run: " << ReportUnavailableReason() << "\n";
+    std::optional<double> keyframe_voxel;  // keyframe clouds kept for the OctoMap and the report
+    if (want_octomap) keyframe_voxel = octomap_config.downsample_voxel;
+    else if (want_report && report.cloud_points > 0) keyframe_voxel = 0.05;
 
     std::cerr << "planeslam run: " << input.name << ", " << indices.size() << " frames, detector "
               << detector->Name() << "\n";
     InstallInterruptHandlers();
     FrameLoopLog log;
     const auto wall_start = Clock::now();
-    ProcessFrames(input, indices, run, *detector, want_octomap ? &octomap_config : nullptr,
-                  options_.quiet, slam, &log);
+    ProcessFrames(input, indices, run, *detector, keyframe_voxel, options_.quiet, slam, &log);
     if (log.done == 0) {
       throw IoError(input.name, "interrupted before the first frame: nothing written");
     }
@@ -424,6 +450,7 @@ class RunCommand : public Command {
     if (!metrics.is_null()) summary["metrics"] = metrics;
     ds::WriteFileAtomic(out_dir + "/summary.json", summary.dump(2) + "\n");
     if (!metrics.is_null()) ds::WriteFileAtomic(out_dir + "/metrics.json", metrics.dump(2) + "\n");
+    if (want_report && ReportAvailable()) WriteReportOrWarn(out_dir, slam, log, report);
     PrintReport(slam, log, times, ate_line, out_dir);
     if (log.interrupted) return kExitInterrupted;
     if (log.stopped_at_bad_frame) return kExitStoppedAtBadFrame;
@@ -436,6 +463,7 @@ class RunCommand : public Command {
   std::string scene_;
   std::string method_;
   std::string sensor_;
+  bool no_report_ = false;
   ConfigOptions options_;
 };
 
