@@ -1,5 +1,5 @@
 // The page of a `planeslam run` output folder.
-import { Viewer, THREE, unpackPoints, makePoints, makeLine, ramp } from './viewer.js';
+import { Viewer, THREE, unpackPoints, makePoints, makeLine, ramp, robustBox } from './viewer.js';
 import { statGrid, fmt, planeInfoTable, showNotes, showConfig } from './summary.js';
 import { framePlots, stageTimePlot, inlineSvg } from './plots.js';
 
@@ -125,7 +125,8 @@ export function runPage(data, state) {
 function buildRunScene(data, state) {
   const viewer = new Viewer(document.getElementById('view'), state);
   viewer.up = upDirection(data);
-  const box = new THREE.Box3();
+  const autoUp = viewer.up.toArray();
+  const extent = [];  // what the view frames: outline vertices, keyframes (or else the cloud)
 
   const planes = new THREE.Group();
   const outlines = new THREE.Group();
@@ -135,7 +136,7 @@ function buildRunScene(data, state) {
     planes.add(mesh);
     viewer.pickables.push(mesh);
     outlines.add(planeOutlines(plane));
-    for (const polygon of plane.polygons) for (const p of polygon) box.expandByPoint(new THREE.Vector3(...p));
+    for (const polygon of plane.polygons) for (const p of polygon) extent.push(...p);
   }
   viewer.addLayer('planes', `Planes (${planes.children.length})`, planes, true);
   viewer.addLayer('outlines', 'Outlines', outlines, true);
@@ -149,7 +150,7 @@ function buildRunScene(data, state) {
   const orange = new THREE.Color(0xe0660f);
   for (let i = 0; i < kfPoints.length; ++i) orange.toArray(kfColours, 3 * i);
   trajectory.add(makePoints(new Float32Array(kfPoints.flat()), kfColours, 5));
-  for (const p of kfPoints) box.expandByPoint(new THREE.Vector3(...p));
+  for (const p of kfPoints) extent.push(...p);
   viewer.addLayer('keyframes', `Keyframes (${kfPoints.length})`, trajectory, true, '#e0660f');
 
   let gtCount = 0;
@@ -169,21 +170,20 @@ function buildRunScene(data, state) {
   if (data.cloud && data.cloud.count > 0) {
     const pos = unpackPoints(data.cloud);
     cloudCount = pos.length / 3;
-    let lo = Infinity, hi = -Infinity;
+    // Coloured by height along the up axis, the ramp spanning the 2nd to 98th percentile.
     const up = viewer.up;
-    for (let i = 0; i < pos.length; i += 3) {
-      const h = pos[i] * up.x + pos[i + 1] * up.y + pos[i + 2] * up.z;
-      lo = Math.min(lo, h); hi = Math.max(hi, h);
-    }
+    const heights = new Float32Array(cloudCount);
+    for (let i = 0; i < cloudCount; ++i) heights[i] = pos[3 * i] * up.x + pos[3 * i + 1] * up.y + pos[3 * i + 2] * up.z;
+    const sorted = heights.slice().sort();
+    const lo = sorted[Math.floor(0.02 * (cloudCount - 1))], hi = sorted[Math.ceil(0.98 * (cloudCount - 1))];
     const col = new Float32Array(pos.length);
-    for (let i = 0; i < pos.length; i += 3) {
-      const h = pos[i] * up.x + pos[i + 1] * up.y + pos[i + 2] * up.z;
-      ramp((h - lo) / Math.max(hi - lo, 1e-6)).toArray(col, i);
-    }
+    for (let i = 0; i < cloudCount; ++i) ramp((heights[i] - lo) / Math.max(hi - lo, 1e-6)).toArray(col, 3 * i);
     viewer.addLayer('cloud', `Keyframe points (${cloudCount})`, makePoints(pos, col, 1.5), planes.children.length === 0);
-    if (box.isEmpty()) { const g = new THREE.BufferGeometry(); g.setAttribute('position', new THREE.BufferAttribute(pos, 3)); g.computeBoundingBox(); box.union(g.boundingBox); }
+    if (planes.children.length === 0) for (const v of pos) extent.push(v);
   }
+  const box = robustBox(extent);
   if (box.isEmpty()) box.expandByPoint(new THREE.Vector3()).expandByScalar(1);
+  viewer.addUpSelector(autoUp, () => viewer.frame(box));
 
   viewer.addButton('Reset view', 'reset-view', () => viewer.frame(box));
   viewer.addButton('Top view', 'top-view', () => viewer.frame(box, true));

@@ -74,6 +74,23 @@ export class Viewer {
     toolbar.appendChild(item);
   }
 
+  /// A selector of the up axis (auto = `auto`, or a world axis); calls onChange after setting it.
+  addUpSelector(auto, onChange) {
+    const choices = [['auto', auto], ['+z', [0, 0, 1]], ['-z', [0, 0, -1]], ['+y', [0, 1, 0]],
+      ['-y', [0, -1, 0]], ['+x', [1, 0, 0]], ['-x', [-1, 0, 0]]];
+    const label = document.createElement('label');
+    label.textContent = 'Up ';
+    const select = document.createElement('select');
+    select.id = 'up-axis';
+    for (const [name] of choices) select.add(new Option(name, name));
+    select.addEventListener('change', () => {
+      this.up.copy(new THREE.Vector3(...choices.find((c) => c[0] === select.value)[1]).normalize());
+      onChange();
+    });
+    label.appendChild(select);
+    this.container.querySelector('#toolbar').appendChild(label);
+  }
+
   addButton(label, id, onClick) {
     const b = document.createElement('button');
     b.textContent = label;
@@ -131,6 +148,24 @@ export class Viewer {
       down = null;
     });
   }
+}
+
+/// The box holding all but the outer 2 % of `points` (flat xyz) on each axis, grown by a tenth:
+/// one far stray plane or point does not shrink the view of the rest to a dot.
+export function robustBox(points) {
+  const n = points.length / 3;
+  const box = new THREE.Box3();
+  if (n === 0) return box;
+  const lo = [], hi = [];
+  for (let a = 0; a < 3; ++a) {
+    const v = new Float32Array(n);
+    for (let i = 0; i < n; ++i) v[i] = points[3 * i + a];
+    v.sort();
+    lo.push(v[Math.floor(0.02 * (n - 1))]);
+    hi.push(v[Math.ceil(0.98 * (n - 1))]);
+  }
+  box.set(new THREE.Vector3(...lo), new THREE.Vector3(...hi));
+  return box.expandByVector(box.getSize(new THREE.Vector3()).multiplyScalar(0.1));
 }
 
 /// Decodes base64 into a typed array of `Type`.
