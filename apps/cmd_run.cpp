@@ -333,15 +333,17 @@ void PrintReport(const mapping::SlamSystem& slam, const FrameLoopLog& log, const
 }
 
 /// keyframe_cloud.pcd and report.html, written last from the output files; a failure there leaves
-/// the other outputs standing and is reported as a warning.
+/// the other outputs standing and is reported as a warning. Prints the time it took.
 void WriteReportOrWarn(const std::string& out_dir, const mapping::SlamSystem& slam,
                        const FrameLoopLog& log, const ReportConfig& report) {
+  const auto t = Clock::now();
   try {
     if (report.cloud_points > 0 && !log.keyframe_clouds.empty()) {
       WriteKeyframeCloud(out_dir + "/keyframe_cloud.pcd", log.keyframe_clouds, slam.KeyframePoses(),
                          static_cast<std::size_t>(report.cloud_points));
     }
     WriteRunReport(out_dir, static_cast<std::size_t>(report.cloud_points));
+    std::printf("report.html written in %.0f ms\n", MsSince(t));
   } catch (const std::exception& e) {
     std::cerr << "planeslam run: warning: report.html not written: " << e.what() << "\n";
   }
@@ -450,8 +452,8 @@ class RunCommand : public Command {
     if (!metrics.is_null()) summary["metrics"] = metrics;
     ds::WriteFileAtomic(out_dir + "/summary.json", summary.dump(2) + "\n");
     if (!metrics.is_null()) ds::WriteFileAtomic(out_dir + "/metrics.json", metrics.dump(2) + "\n");
-    if (want_report && ReportAvailable()) WriteReportOrWarn(out_dir, slam, log, report);
     PrintReport(slam, log, times, ate_line, out_dir);
+    if (want_report && ReportAvailable()) WriteReportOrWarn(out_dir, slam, log, report);
     if (log.interrupted) return kExitInterrupted;
     if (log.stopped_at_bad_frame) return kExitStoppedAtBadFrame;
     return log.bad_frames.empty() ? kExitSuccess : kExitSkippedFrames;
