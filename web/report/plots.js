@@ -30,22 +30,22 @@ function parseCsv(text) {
 
 const W = 720, H = 220, L = 48, R = 12, T = 12, B = 30;
 
-function axes(xmax, ymax, xlabel, ylabel, left = L, yTicks = true) {
+function axes(xmax, ymax, xlabel, ylabel, left = L, yTicks = true, right = R) {
   const parts = [];
   const nice = (m) => { const p = Math.pow(10, Math.floor(Math.log10(m || 1))); return [1, 2, 5, 10].map((k) => k * p).find((s) => m / s <= 6); };
   const ys = nice(ymax), xs = nice(xmax);
   for (let y = 0; yTicks && y <= ymax + 1e-9; y += ys) {
     const py = T + (H - T - B) * (1 - y / ymax);
-    parts.push(`<line x1="${left}" x2="${W - R}" y1="${py}" y2="${py}" stroke="#e3e6ea"/>`);
+    parts.push(`<line x1="${left}" x2="${W - right}" y1="${py}" y2="${py}" stroke="#e3e6ea"/>`);
     parts.push(`<text x="${left - 6}" y="${py + 4}" text-anchor="end" font-size="11" fill="#5c6670">${+y.toFixed(6)}</text>`);
   }
   for (let x = 0; x <= xmax + 1e-9; x += xs) {
-    const px = left + (W - left - R) * (x / xmax);
+    const px = left + (W - left - right) * (x / xmax);
     parts.push(`<text x="${px}" y="${H - B + 15}" text-anchor="middle" font-size="11" fill="#5c6670">${+x.toFixed(6)}</text>`);
   }
-  parts.push(`<text x="${(left + W - R) / 2}" y="${H - 3}" text-anchor="middle" font-size="11" fill="#5c6670">${xlabel}</text>`);
+  parts.push(`<text x="${(left + W - right) / 2}" y="${H - 3}" text-anchor="middle" font-size="11" fill="#5c6670">${xlabel}</text>`);
   parts.push(`<text x="11" y="${(T + H - B) / 2}" text-anchor="middle" font-size="11" fill="#5c6670" transform="rotate(-90 11 ${(T + H - B) / 2})">${ylabel}</text>`);
-  parts.push(`<rect x="${left}" y="${T}" width="${W - left - R}" height="${H - T - B}" fill="none" stroke="#b9c0c8"/>`);
+  parts.push(`<rect x="${left}" y="${T}" width="${W - left - right}" height="${H - T - B}" fill="none" stroke="#b9c0c8"/>`);
   return parts.join('');
 }
 
@@ -96,9 +96,9 @@ export function framePlots(container, csv) {
     ['skipped / stopped', (r) => r.status !== 'ok', '#d62728'],
   ];
   const rowH = (H - T - B) / flags.length;
-  const left = 110;
-  const fx = (i) => left + (W - left - R) * (i / xmax);
-  let body = axes(xmax, 1, 'frame index', '', left, false);
+  const left = 110, right = 44;
+  const fx = (i) => left + (W - left - right) * (i / xmax);
+  let body = axes(xmax, 1, 'frame index', '', left, false, right);
   flags.forEach(([name, test, colour], k) => {
     const y = T + k * rowH;
     body += `<text x="${left - 4}" y="${y + rowH * 0.7}" text-anchor="end" font-size="10" fill="#5c6670">${name}</text>`;
@@ -106,9 +106,9 @@ export function framePlots(container, csv) {
     for (const r of rows) {
       if (!test(r)) continue;
       ++count;
-      body += `<rect x="${fx(+r.index).toFixed(1)}" y="${(y + 2).toFixed(1)}" width="${Math.max(1, (W - left - R) / xmax).toFixed(2)}" height="${(rowH - 4).toFixed(1)}" fill="${colour}"/>`;
+      body += `<rect x="${fx(+r.index).toFixed(1)}" y="${(y + 2).toFixed(1)}" width="${Math.max(1, (W - left - right) / xmax).toFixed(2)}" height="${(rowH - 4).toFixed(1)}" fill="${colour}"/>`;
     }
-    body += `<text x="${W - R - 4}" y="${y + rowH * 0.7}" text-anchor="end" font-size="10" fill="#1d232b">${count}</text>`;
+    body += `<text x="${W - 4}" y="${y + rowH * 0.7}" text-anchor="end" font-size="10" fill="#1d232b">${count}</text>`;
   });
   chart(container, 'Frame events (frames.csv; counts at the right)', body, null);
 }
