@@ -155,7 +155,6 @@ void AddGroundTruth(const fs::path& dir, nlohmann::json* data) {
       return;
     }
     (*data)["ground_truth"] = Positions(ape.est_poses, 20000);
-    (*data)["estimate"] = Positions(ape.ref_poses, 20000);
   } catch (const IoError& e) {
     (*data)["notes"].push_back(std::string("ground truth not shown: ") + e.what());
   }

@@ -115,10 +115,28 @@ async function testRun(browser, dir) {
     const source = { summary, metrics, plane_map: planes }[root];
     return path.reduce((o, k) => (o === undefined || o === null ? undefined : o[k]), source);
   });
-  // Hover over the middle of the view and click: picking must not throw (console errors fail).
-  const box = await page.locator('#view canvas').boundingBox();
-  await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
-  await page.mouse.click(box.x + box.width / 2, box.y + box.height / 2);
+  // Click the centres of the largest planes: the info box must name a plane of plane_map.json,
+  // and at least one click (others may hit a plane in front) the plane clicked.
+  const targets = await page.evaluate(() => {
+    const v = window.planeslamReport.viewer;
+    const r = v.renderer.domElement.getBoundingClientRect();
+    const meshes = [...v.layers.get('planes').children].sort((a, b) => b.userData.plane.area - a.userData.plane.area);
+    return meshes.slice(0, 6).map((m) => {
+      m.geometry.computeBoundingBox();
+      const c = m.geometry.boundingBox.min.clone().add(m.geometry.boundingBox.max).multiplyScalar(0.5).project(v.camera);
+      return { id: m.userData.plane.id, x: r.left + (c.x + 1) / 2 * r.width, y: r.top + (1 - c.y) / 2 * r.height };
+    });
+  });
+  const ids = new Set(map.planes.map((p) => p.id));
+  let hits = 0;
+  for (const t of targets) {
+    await page.mouse.move(t.x, t.y);
+    await page.mouse.click(t.x, t.y);
+    const shown = await page.$eval('#info', (e) => (e.hidden ? null : +e.querySelector('b').textContent));
+    if (shown !== null) check(ids.has(shown), `${file}: info box shows plane ${shown}, not in plane_map.json`);
+    if (shown === t.id) ++hits;
+  }
+  check(targets.length === 0 || hits > 0, `${file}: clicking the largest planes picked none of them`);
   await page.mouse.move(0, 0);
   await shoot(page, args.name || 'run');
   // The point cloud toggle, the top view and the reset.
@@ -135,7 +153,7 @@ async function testRun(browser, dir) {
   const maxFirst = args['max-first-frame-ms'] ? +args['max-first-frame-ms'] : Infinity;
   check(state.firstFrameMs <= maxFirst, `${file}: first frame after ${state.firstFrameMs.toFixed(0)} ms (limit ${maxFirst})`);
   failures.push(...problems.map((p) => `${file}: ${p}`));
-  console.log(`run report ${file}: ${c.planeMeshes} plane meshes, ${c.trajectoryVertices} keyframe vertices, ${c.loopEdges} loop edges, ` +
+  console.log(`run report ${file}: ${c.planeMeshes} plane meshes (${hits} of ${targets.length} picked by a click), ${c.trajectoryVertices} keyframe vertices, ${c.loopEdges} loop edges, ` +
     `${c.groundTruthVertices} ground-truth vertices, ${c.cloudPoints} cloud points, ${figures} figures checked, canvas variance ${variance.toFixed(0)}, first frame ${state.firstFrameMs.toFixed(0)} ms`);
   await page.close();
 }
