@@ -7,6 +7,8 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <iterator>
+#include <limits>
 
 #include "planeslam/datasets/errors.hpp"
 #include "planeslam/datasets/sequence_factory.hpp"
@@ -162,10 +164,36 @@ TEST(KittiScan, BadFilesAreIoErrors) {
   }
   EXPECT_EQ(ErrorOf([&] { ReadKittiScan((dir / "000000.bin").string()); }),
             (dir / "000000.bin").string() +
-                ": size 20 bytes is not a multiple of 16 (float32 x y z reflectance per point)");
+                ": truncated or not a KITTI scan: size 20 bytes is not a multiple of 16 (float32 "
+                "x y z reflectance per point)");
   { std::ofstream out(dir / "000000.bin", std::ios::binary); }
   EXPECT_EQ(ErrorOf([&] { ReadKittiScan((dir / "000000.bin").string()); }),
-            (dir / "000000.bin").string() + ": empty scan");
+            (dir / "000000.bin").string() + ": empty scan (0 bytes)");
+  // A whole scan cut short in the middle of a point.
+  const auto scan = SyntheticScan(4, 10, 5.0);
+  WriteScan(dir / "000001.bin", scan);
+  std::string whole;
+  {
+    std::ifstream in(dir / "000001.bin", std::ios::binary);
+    whole.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  { std::ofstream(dir / "000001.bin", std::ios::binary) << whole.substr(0, whole.size() - 7); }
+  EXPECT_NE(ErrorOf([&] { ReadKittiScan((dir / "000001.bin").string()); })
+                .find("000001.bin: truncated or not a KITTI scan: size 633 bytes"),
+            std::string::npos);
+  // NaN and infinite coordinates.
+  for (float bad : {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity()}) {
+    auto broken = scan;
+    broken[7].y() = bad;
+    WriteScan(dir / "000002.bin", broken);
+    EXPECT_EQ(ErrorOf([&] { ReadKittiScan((dir / "000002.bin").string()); }),
+              (dir / "000002.bin").string() +
+                  ": point 7 of 40 has a NaN or infinite coordinate (corrupt scan)");
+  }
+  // Points without a return.
+  WriteScan(dir / "000003.bin", std::vector<LidarPoint>(5, LidarPoint::Zero()));
+  EXPECT_EQ(ErrorOf([&] { ReadKittiScan((dir / "000003.bin").string()); }),
+            (dir / "000003.bin").string() + ": empty scan: all 5 points are at the origin");
   EXPECT_EQ(ErrorOf([&] { ReadKittiScan((dir / "nope.bin").string()); }),
             (dir / "nope.bin").string() + ": no such file");
 }
