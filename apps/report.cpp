@@ -99,6 +99,25 @@ std::vector<Eigen::Vector3f> ThinToCount(std::vector<Eigen::Vector3f> points, do
   return points;
 }
 
+/// Moves the planes' outline vertices into one packed point block ("polygon_points", see
+/// PackPoints), each plane keeping only its part sizes ("parts"): a street map's 300 000 outline
+/// vertices take 2.4 MB this way instead of 20 MB of JSON numbers.
+void PackPolygons(nlohmann::json* data) {
+  std::vector<Eigen::Vector3f> vertices;
+  for (auto& plane : (*data)["planes"]) {
+    nlohmann::json parts = nlohmann::json::array();
+    for (const auto& polygon : plane.value("polygons", nlohmann::json::array())) {
+      parts.push_back(polygon.size());
+      for (const auto& v : polygon) {
+        vertices.emplace_back(v.at(0).get<float>(), v.at(1).get<float>(), v.at(2).get<float>());
+      }
+    }
+    plane.erase("polygons");
+    plane["parts"] = parts;
+  }
+  (*data)["polygon_points"] = PackPoints(vertices);
+}
+
 nlohmann::json PoseJson(const Pose& T) {
   const Eigen::Vector3d p = T.translation();
   const Eigen::Quaterniond q(T.rotation());
@@ -263,6 +282,11 @@ bool WriteRunReport(const std::string& dir_name, std::size_t max_cloud_points) {
     throw IoError((dir / "plane_map.json").string(), "no \"planes\" array");
   }
   data["planes"] = map["planes"];
+  try {
+    PackPolygons(&data);
+  } catch (const nlohmann::json::exception& e) {
+    throw IoError((dir / "plane_map.json").string(), std::string("bad polygon: ") + e.what());
+  }
   AddGraph(dir / "pose_graph.g2o", &data);
   data["metrics"] = fs::exists(dir / "metrics.json") ? ReadJson(dir / "metrics.json") : nullptr;
   data["config_yaml"] = fs::exists(dir / "config.yaml") ? Slurp(dir / "config.yaml") : "";

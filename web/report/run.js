@@ -37,16 +37,35 @@ function planeMesh(plane) {
   return mesh;
 }
 
-function planeOutlines(plane) {
-  const group = new THREE.Group();
-  const colour = new THREE.Color(...plane.color.map((c) => c / 400));
-  for (const polygon of plane.polygons) {
-    if (polygon.length < 2) continue;
-    const g = new THREE.BufferGeometry();
-    g.setAttribute('position', new THREE.Float32BufferAttribute(polygon.flat(), 3));
-    group.add(new THREE.LineLoop(g, new THREE.LineBasicMaterial({ color: colour })));
+/// Every plane's outline edges as one LineSegments object, each in a darker shade of its plane.
+function outlines(planes) {
+  const pos = [], col = [];
+  for (const plane of planes) {
+    const c = plane.color.map((v) => v / 400);
+    for (const polygon of plane.polygons) {
+      for (let i = 0; i < polygon.length; ++i) {
+        pos.push(...polygon[i], ...polygon[(i + 1) % polygon.length]);
+        col.push(...c, ...c);
+      }
+    }
   }
-  return group;
+  const g = new THREE.BufferGeometry();
+  g.setAttribute('position', new THREE.Float32BufferAttribute(pos, 3));
+  g.setAttribute('color', new THREE.Float32BufferAttribute(col, 3));
+  return new THREE.LineSegments(g, new THREE.LineBasicMaterial({ vertexColors: true }));
+}
+
+/// The planes' outlines from the packed vertex block ("parts": vertices per outline part).
+function unpackPolygons(data) {
+  const pts = data.polygon_points ? unpackPoints(data.polygon_points) : new Float32Array(0);
+  let at = 0;
+  for (const plane of data.planes) {
+    plane.polygons = (plane.parts || []).map((n) => {
+      const polygon = [];
+      for (let i = 0; i < n; ++i, at += 3) polygon.push([pts[at], pts[at + 1], pts[at + 2]]);
+      return polygon;
+    });
+  }
 }
 
 /// The world's up direction: the sensor's up axis averaged over the keyframes (a camera's -y, a
@@ -102,6 +121,7 @@ function summaryStats(data) {
 }
 
 export function runPage(data, state) {
+  unpackPolygons(data);
   const s = data.summary;
   document.getElementById('view-title').textContent =
     '3-D view: plane map, keyframes' + (data.ground_truth ? ', ground truth' : '') + ', loop closures';
@@ -129,17 +149,15 @@ function buildRunScene(data, state) {
   const extent = [];  // what the view frames: outline vertices, keyframes (or else the cloud)
 
   const planes = new THREE.Group();
-  const outlines = new THREE.Group();
   for (const plane of data.planes) {
     if (!plane.polygons || plane.polygons.length === 0) continue;
     const mesh = planeMesh(plane);
     planes.add(mesh);
     viewer.pickables.push(mesh);
-    outlines.add(planeOutlines(plane));
     for (const polygon of plane.polygons) for (const p of polygon) extent.push(...p);
   }
   viewer.addLayer('planes', `Planes (${planes.children.length})`, planes, true);
-  viewer.addLayer('outlines', 'Outlines', outlines, true);
+  viewer.addLayer('outlines', 'Outlines', outlines(data.planes), true);
 
   const kfPoints = data.keyframes.map((k) => [k[0], k[1], k[2]]);
   const trajectory = new THREE.Group();
