@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "cli_common.hpp"
+#include "closure_report.hpp"
 #include "command_registry.hpp"
 #include "config_sections_app.hpp"
 #include "config_sections_datasets.hpp"
@@ -111,7 +112,7 @@ void LogFrame(std::size_t index, double timestamp, const mapping::SlamFrameResul
   log << index << "," << ds::FormatRoundTrip(timestamp) << "," << result.keyframe << ","
       << result.planes << "," << result.matches << "," << result.tracked << "," << result.degenerate
       << "," << result.used_point_to_plane << "," << result.loop_closures << "," << result.refused
-      << ",ok\n";
+      << "," << result.closures_rejected << "," << result.closures_retracted << ",ok\n";
 }
 
 /// Loads frame `index`; a frame the sequence cannot read is recorded in `log` (frames.csv row,
@@ -128,7 +129,7 @@ std::optional<ds::Frame> LoadOrRecordBad(const RunInput& input, std::size_t inde
     std::cerr << (::isatty(STDERR_FILENO) ? "\n" : "")
               << "planeslam run: " << (stop ? "error" : "warning") << ": frame " << index
               << (stop ? " stops the run" : " skipped") << ": " << bad.error << "\n";
-    log->frame_log << index << "," << ds::FormatRoundTrip(bad.timestamp) << ",,,,,,,,,"
+    log->frame_log << index << "," << ds::FormatRoundTrip(bad.timestamp) << ",,,,,,,,,,,"
                    << (stop ? "stopped" : "skipped") << "\n";
     log->bad_frames.push_back(std::move(bad));
     log->stopped_at_bad_frame = stop;
@@ -143,7 +144,7 @@ void ProcessFrames(const RunInput& input, const std::vector<std::size_t>& indice
                    mapping::SlamSystem& slam, FrameLoopLog* log) {
   ProgressBar progress("run", indices.size(), quiet);
   log->frame_log << "index,timestamp,keyframe,planes,matches,tracked,degenerate,point_to_plane,"
-                    "loop_closures,refused,status\n";
+                    "loop_closures,refused,closures_rejected,closures_retracted,status\n";
   for (std::size_t i : indices) {
     if (StopRequested()) {
       log->interrupted = true;
@@ -186,6 +187,7 @@ void WriteMapOutputs(const std::string& out_dir, const mapping::SlamSystem& slam
   mapping::WriteG2o(slam.graph(), out_dir + "/pose_graph.g2o");
   ds::WriteFileAtomic(out_dir + "/config.yaml", config.ToYaml(true));
   ds::WriteFileAtomic(out_dir + "/frames.csv", log.frame_log.str());
+  WriteClosuresCsv(out_dir + "/closures.csv", slam, log.ground_truth);
 }
 
 /// The keyframes' thinned clouds inserted at their optimised poses, written as octomap.bt.
@@ -314,6 +316,9 @@ void PrintReport(const mapping::SlamSystem& slam, const FrameLoopLog& log, const
   std::printf("loop candidates %zu, refused: degenerate %zu, few matches %zu, residual %zu\n",
               stats.loop_candidates, stats.loop_refused_degenerate, stats.loop_refused_matches,
               stats.loop_refused_residual);
+  std::printf("closure hypotheses %zu: accepted %zu, rejected %zu, retracted %zu (closures.csv)\n",
+              slam.closures().size(), stats.loop_closures, stats.closures_rejected,
+              stats.closures_retracted);
   if (!log.bad_frames.empty() && !log.stopped_at_bad_frame) {
     std::printf("SKIPPED %zu unreadable frame(s):", log.bad_frames.size());
     for (const BadFrame& b : log.bad_frames) std::printf(" %zu", b.index);
@@ -343,7 +348,7 @@ class RunCommand : public Command {
                    "omitted: the synthetic scene of the 'simulation' config section");
     sub.add_option("-o,--out", out_dir_,
                    "output folder (default: output.directory, planeslam_out)");
-    sub.add_option("--scene", scene_, "synthetic scene when no SEQUENCE: room, corridor, rubble");
+    sub.add_option("--scene", scene_, "synthetic scene when no SEQUENCE: room, corridor, rubble, ring");
     sub.add_option("--method", method_, "plane detector (default: detection.method)");
     AddSensorOption(sub, sensor_);
     AddConfigOptions(sub, options_);
@@ -383,6 +388,7 @@ class RunCommand : public Command {
     const std::vector<std::size_t> indices = FrameIndices(input, run);
     const std::unique_ptr<mapping::SlamSystem> slam_system = MakeSlamSystem(config);
     mapping::SlamSystem& slam = *slam_system;
+    slam.PlanRun(indices.size());
     if (run.start_at_ground_truth) {
       if (auto gt = input.sequence->GroundTruth(indices.front())) slam.SetInitialPose(*gt);
     }
@@ -421,6 +427,8 @@ class RunCommand : public Command {
     }
     times.write_ms = MsSince(t);
     nlohmann::json summary = SummaryJson(input.name, slam, final_optimization, log, times);
+    summary["closures"] = ClosuresJson(slam, log.ground_truth);
+    summary["back_end"] = BackEndJson(slam);
     if (!metrics.is_null()) summary["metrics"] = metrics;
     ds::WriteFileAtomic(out_dir + "/summary.json", summary.dump(2) + "\n");
     if (!metrics.is_null()) ds::WriteFileAtomic(out_dir + "/metrics.json", metrics.dump(2) + "\n");

@@ -34,14 +34,15 @@ class SimulateCommand : public Command {
  public:
   std::string Name() const override { return "simulate"; }
   std::string Summary() const override {
-    return "Synthetic sequence (room, corridor, rubble) with exact poses, plane labels and planes";
+    return "Synthetic sequence (room, corridor, rubble, ring) with exact poses, plane labels and "
+           "planes";
   }
   int Order() const override { return 40; }
 
   void Setup(CLI::App& sub) override {
     sub.add_option("scene", scene_, "room (office-like), corridor (degenerate), rubble (unstructured)")
         ->required()
-        ->check(CLI::IsMember({"room", "corridor", "rubble"}));
+        ->check(CLI::IsMember({"room", "corridor", "rubble", "ring"}));
     sub.add_option("-o,--out", out_, "output folder (created)")->required();
     sub.add_option("--frames", frames_, "number of frames (default: the scene's whole path)")
         ->check(CLI::Range(1, 1000000));

@@ -11,8 +11,9 @@ namespace {
 namespace ds = planeslam::datasets;
 
 void VisitSimulation(FieldVisitor& v, SimulationConfig& c) {
-  v.Field("scene", c.scene, "synthetic world: room (office), corridor (degenerate), rubble",
-          {"room", "corridor", "rubble"});
+  v.Field("scene", c.scene,
+          "synthetic world: room (office), corridor (degenerate), rubble, ring (aliasing)",
+          {"room", "corridor", "rubble", "ring"});
   v.Field("seed", c.seed, "seed of the rubble layout and the sensor noise [-]", 0, 2147483647);
   v.Field("sensor", c.sensor, "pinhole depth camera or spherical scanner", {"pinhole", "spherical"});
   v.Field("noise", c.noise, "sensor noise on (false: exact ranges)");

@@ -5,6 +5,7 @@
 #include "planeslam/datasets/errors.hpp"
 #include "synthetic_random.hpp"
 #include "planeslam/datasets/synthetic_scene.hpp"
+#include "synthetic_scene_ring.hpp"
 
 namespace planeslam::datasets {
 
@@ -269,6 +270,8 @@ std::string SceneName(SceneKind kind) {
       return "corridor";
     case SceneKind::kRubble:
       return "rubble";
+    case SceneKind::kRing:
+      return "ring";
   }
   return "room";
 }
@@ -277,7 +280,9 @@ SceneKind ParseSceneKind(const std::string& name) {
   if (name == "room") return SceneKind::kRoom;
   if (name == "corridor") return SceneKind::kCorridor;
   if (name == "rubble") return SceneKind::kRubble;
-  throw ConfigError("unknown synthetic scene '" + name + "' (expected room, corridor or rubble)");
+  if (name == "ring") return SceneKind::kRing;
+  throw ConfigError("unknown synthetic scene '" + name +
+                    "' (expected room, corridor, rubble or ring)");
 }
 
 double ScenePlane::Area() const {
@@ -324,6 +329,8 @@ SyntheticScene MakeScene(SceneKind kind, std::uint64_t seed) {
       return MakeCorridor();
     case SceneKind::kRubble:
       return MakeRubble(seed);
+    case SceneKind::kRing:
+      return MakeRingCorridor();
   }
   return MakeRoom();
 }

@@ -19,9 +19,10 @@ enum class SceneKind {
   kRoom,      ///< office-like room (6 x 5 x 2.8 m): walls, floor, ceiling, table, boxes, door recess
   kCorridor,  ///< 30 m corridor, open ends: plane registration cannot observe motion along x
   kRubble,    ///< small tilted slabs, spheres and cylinders on a ground plane: unstructured
+  kRing,      ///< octagonal ring corridor of 8 identical segments: made to fool place recognition
 };
 
-/// "room", "corridor", "rubble".
+/// "room", "corridor", "rubble", "ring".
 std::string SceneName(SceneKind kind);
 /// Inverse of SceneName; throws ConfigError naming the accepted values.
 SceneKind ParseSceneKind(const std::string& name);
