@@ -523,29 +523,48 @@ FrameAssociation PlaneMap::AddFrame(std::int64_t keyframe_id, const Pose& T_worl
 }
 
 int PlaneMap::Refit(const std::unordered_map<std::int64_t, Pose>& T_world_keyframe) {
+  // Only the planes seen from a keyframe that moved are re-fitted and compared again: after a
+  // windowed optimisation that is the window's planes, so the cost follows the window.
+  std::unordered_set<std::int64_t> moved;
   for (const auto& [id, pose] : T_world_keyframe) {
     PLANESLAM_CHECK(pose.matrix().allFinite(), "pose of keyframe " << id << " not finite");
     const auto it = keyframe_poses_.find(id);
-    if (it != keyframe_poses_.end()) it->second = pose;
+    if (it == keyframe_poses_.end() || it->second.matrix() == pose.matrix()) continue;
+    it->second = pose;
+    moved.insert(id);
   }
-  for (auto& plane : planes_) RefitPlane(plane);
-  for (const auto& plane : planes_) RebuildExtent(plane);
-  return MergeCoincidentPlanes(config_.refit_merge_across_gaps_offset);
+  std::unordered_set<int> changed;
+  for (auto& plane : planes_) {
+    const bool seen_moving =
+        std::any_of(plane.observations.begin(), plane.observations.end(),
+                    [&](const PlaneObservation& obs) { return moved.count(obs.keyframe_id) != 0; });
+    if (!seen_moving) continue;
+    RefitPlane(plane);
+    RebuildExtent(plane);
+    changed.insert(plane.id);
+  }
+  return MergeCoincident(config_.refit_merge_across_gaps_offset, &changed);
 }
 
 int PlaneMap::MergeCoincidentPlanes(double across_gaps_offset) {
+  return MergeCoincident(across_gaps_offset, nullptr);
+}
+
+int PlaneMap::MergeCoincident(double across_gaps_offset, std::unordered_set<int>* changed) {
   int merges = 0;
-  bool changed = true;
-  while (changed) {
-    changed = false;
-    for (std::size_t i = 0; i < planes_.size() && !changed; ++i) {
-      for (std::size_t j = i + 1; j < planes_.size() && !changed; ++j) {
+  bool merged = true;
+  while (merged) {
+    merged = false;
+    for (std::size_t i = 0; i < planes_.size() && !merged; ++i) {
+      for (std::size_t j = i + 1; j < planes_.size() && !merged; ++j) {
+        if (changed && !changed->count(planes_[i].id) && !changed->count(planes_[j].id)) continue;
         if (Coincide(planes_[i], planes_[j], across_gaps_offset) ||
             Coincide(planes_[j], planes_[i], across_gaps_offset)) {
           const bool i_first = planes_[i].id < planes_[j].id;
+          if (changed) changed->insert(i_first ? planes_[i].id : planes_[j].id);
           MergeInto(i_first ? i : j, i_first ? j : i);
           ++merges;
-          changed = true;
+          merged = true;
         }
       }
     }

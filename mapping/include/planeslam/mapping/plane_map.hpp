@@ -163,9 +163,10 @@ class PlaneMap {
                             const detection::Segmentation& segmentation,
                             const datasets::OrganizedCloud& cloud);
 
-  /// Re-fits every map plane from its observations with new keyframe poses (e.g. after pose-graph
-  /// optimisation); keyframes absent from `T_world_keyframe` keep their pose. Then merges planes
-  /// that now coincide (apart ones within refit_merge_across_gaps_offset). Returns the number of
+  /// Re-fits the map planes seen from keyframes whose pose changed from their observations with
+  /// the new keyframe poses (e.g. after pose-graph optimisation); keyframes absent from
+  /// `T_world_keyframe` keep their pose. Then merges a re-fitted plane with any plane it now
+  /// coincides with (apart ones within refit_merge_across_gaps_offset). Returns the number of
   /// merges.
   int Refit(const std::unordered_map<std::int64_t, Pose>& T_world_keyframe);
 
@@ -210,6 +211,9 @@ class PlaneMap {
   int CountTouching(const Extent& extent, const std::vector<Eigen::Vector3d>& world_points,
                     int enough) const;
   bool Coincide(const MapPlane& a, const MapPlane& b, double across_gaps_offset) const;
+  /// MergeCoincidentPlanes over the pairs with a plane in `changed` (all pairs when null); a
+  /// merged plane joins `changed`.
+  int MergeCoincident(double across_gaps_offset, std::unordered_set<int>* changed);
   /// Merges planes_[j] into planes_[i] (i keeps its id); erases j.
   void MergeInto(std::size_t i, std::size_t j);
   std::size_t IndexOf(int id) const;
