@@ -76,8 +76,8 @@ void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
   v.Field("loop_window_keyframes", c.loop_window_keyframes,
           "[keyframes] a closure hypothesis waits this long for support", 0, 1000000);
   v.Field("local_window_keyframes", c.local_window_keyframes,
-          "[keyframes] closures that agree with the estimate optimise only this many latest "
-          "keyframes (0 = always the whole graph)",
+          "[keyframes] after accepted closures optimise this many latest keyframes, the whole "
+          "graph only when they leave a closure unsatisfied (0 = always the whole graph)",
           0, 1000000);
   v.Field("inject_false_closures", c.inject_false_closures,
           "[closures] test hook: offer this many seeded wrong loop closures over the run", 0,

@@ -546,6 +546,45 @@ int PlaneMap::Refit(const std::unordered_map<std::int64_t, Pose>& T_world_keyfra
   return MergeCoincident(config_.refit_merge_across_gaps_offset, &changed);
 }
 
+int PlaneMap::SplitContradicted() {
+  // An observation contradicts its plane when, at the current poses, it would no longer pass the
+  // association gates (normal angle, centroid offset with the range term). The contradicting
+  // observations of a plane leave it together as a new plane: the merge that joined them is
+  // undone, and both parts are re-fitted.
+  const double cos_gate = std::cos(config_.max_normal_angle_deg * kDegToRad);
+  int splits = 0;
+  const std::size_t existing = planes_.size();
+  for (std::size_t i = 0; i < existing; ++i) {
+    std::vector<PlaneObservation> keep, leave;
+    for (PlaneObservation& obs : planes_[i].observations) {
+      const Pose& T = KeyframePose(obs.keyframe_id);
+      const double range = obs.stats_sensor.centroid.norm();
+      const double offset =
+          std::abs(planes_[i].normal.dot(T * obs.stats_sensor.centroid) - planes_[i].d);
+      const bool agrees = planes_[i].normal.dot(T.linear() * obs.normal_sensor) >= cos_gate &&
+                          offset <= config_.max_offset + config_.max_offset_range_coeff * range * range;
+      (agrees ? keep : leave).push_back(std::move(obs));
+    }
+    if (leave.empty() || keep.empty()) {
+      auto& observations = planes_[i].observations;
+      observations = keep.empty() ? std::move(leave) : std::move(keep);
+      continue;
+    }
+    planes_[i].observations = std::move(keep);
+    RefitPlane(planes_[i]);
+    RebuildExtent(planes_[i]);
+    MapPlane split;
+    split.id = next_id_++;
+    split.observations = std::move(leave);
+    RefitPlane(split);
+    planes_.push_back(std::move(split));
+    extents_.emplace_back();
+    RebuildExtent(planes_.back());
+    ++splits;
+  }
+  return splits;
+}
+
 int PlaneMap::MergeCoincidentPlanes(double across_gaps_offset) {
   return MergeCoincident(across_gaps_offset, nullptr);
 }

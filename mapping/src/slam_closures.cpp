@@ -260,22 +260,26 @@ int SlamSystem::DecideClosures(std::int64_t current_id, SlamFrameResult* result)
 void SlamSystem::OptimizeAfterClosures(int accepted, SlamFrameResult* result) {
   const auto start = std::chrono::steady_clock::now();
   const std::int64_t current_id = keyframes_.back().id;
-  // Closures that agree with the estimate need only the latest keyframes optimised (warm start
-  // from the current poses); one that corrects it needs the whole graph.
-  bool whole = config_.local_window_keyframes == 0 ||
-               current_id < 2 * static_cast<std::int64_t>(config_.local_window_keyframes);
-  for (std::size_t k = closures_.size(); !whole && k-- > 0 && accepted > 0;) {
-    const LoopClosureRecord& record = closures_[k];
-    if (record.status != ClosureStatus::kAccepted || record.to_keyframe != current_id) continue;
-    --accepted;
-    const Vector6d e = registration::BoxMinus(
-        record.T_from_to, KeyframePose(record.from_keyframe).inverse() * KeyframePose(current_id));
-    whole = e.dot(InformationFromCovariance(record.covariance) * e) > config_.loop_consistency_chi2;
+  // The latest keyframes are optimised first (warm start from the current poses); when that
+  // leaves a new closure unsatisfied (residual chi-square above loop_consistency_chi2) the
+  // correction reaches further back and the whole graph is optimised.
+  const bool window = config_.local_window_keyframes > 0 &&
+                      current_id >= 2 * static_cast<std::int64_t>(config_.local_window_keyframes);
+  bool whole = !window;
+  if (window) {
+    const std::int64_t first_free = current_id - config_.local_window_keyframes + 1;
+    Optimize(first_free);
+    for (std::size_t k = closures_.size(); !whole && k-- > 0 && accepted > 0;) {
+      const LoopClosureRecord& record = closures_[k];
+      if (record.status != ClosureStatus::kAccepted || record.to_keyframe != current_id) continue;
+      --accepted;
+      const Vector6d e = registration::BoxMinus(
+          record.T_from_to, KeyframePose(record.from_keyframe).inverse() * KeyframePose(current_id));
+      whole = e.dot(InformationFromCovariance(record.covariance) * e) > config_.loop_consistency_chi2;
+    }
   }
-  const std::int64_t first_free =
-      whole ? -1 : current_id - config_.local_window_keyframes + 1;
-  Optimize(first_free);
-  int retracted = RetractOutliers(std::max<std::int64_t>(first_free, 0), keyframes_.back().frame);
+  if (whole) Optimize();
+  int retracted = RetractOutliers(0, keyframes_.back().frame);
   // Without its outliers the graph is optimised again, whole (they may have bent all of it).
   for (int round = 0; retracted > 0 && round < 3; ++round) {
     result->closures_retracted += retracted;

@@ -271,6 +271,8 @@ PoseGraphResult SlamSystem::Optimize(std::int64_t first_free) {
     ++stats_.local_optimizations;
   } else {
     map_.Refit(KeyframePoses());
+    // The whole graph moved: merges the new poses contradict are undone.
+    stats_.map_splits += static_cast<std::size_t>(map_.SplitContradicted());
   }
   ++stats_.optimizations;
   return result;

@@ -170,6 +170,11 @@ class PlaneMap {
   /// merges.
   int Refit(const std::unordered_map<std::int64_t, Pose>& T_world_keyframe);
 
+  /// Undoes merges the poses now contradict: the observations of a plane that, at the current
+  /// poses, fall outside the association gates (max_normal_angle_deg; max_offset plus the range
+  /// term) become a plane of their own. Returns the number of planes split.
+  int SplitContradicted();
+
   /// Merges map planes that are one surface: within the merge thresholds and with touching
   /// extents, or with extents apart when each centroid lies within `across_gaps_offset` [m] of the
   /// other plane (0: touching only; capped at merge_max_offset). Returns the number of merges. The

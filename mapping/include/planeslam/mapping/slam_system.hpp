@@ -128,10 +128,10 @@ struct SlamConfig {
   /// [keyframes] a hypothesis waits this long for support before it is rejected; closures
   /// accepted this recently support new ones.
   int loop_window_keyframes = 8;
-  /// [keyframes] after closures that agree with the estimate (chi-square below
-  /// loop_consistency_chi2 with their own covariance) only this many latest keyframes are
-  /// optimised (the rest held); closures that correct the estimate optimise the whole graph.
-  /// 0: always the whole graph.
+  /// [keyframes] after accepted closures only this many latest keyframes are optimised first
+  /// (the rest held); when that leaves a new closure's residual above loop_consistency_chi2 the
+  /// correction reaches further back and the whole graph is optimised. 0: always the whole
+  /// graph.
   int local_window_keyframes = 25;
   /// Test hook: this many wrong loop closures (seeded; random keyframe pairs, relative poses off
   /// by 0.1-1 m and 2-20 deg from the estimate, a verified closure's covariance) are offered to
