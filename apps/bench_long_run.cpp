@@ -79,8 +79,9 @@ nlohmann::json RunCase(const ConfigOptions& base, const Case& c, bool quiet) {
 void PrintRow(const nlohmann::json& r) {
   const nlohmann::json& closures = r["closures"];
   const std::size_t false_accepted =
-      closures.contains("ground_truth") ? closures["ground_truth"]["false_accepted"].get<std::size_t>()
-                                        : 0;
+      closures.contains("ground_truth")
+          ? closures["ground_truth"]["false_accepted"].get<std::size_t>()
+          : 0;
   std::printf("%-28s %6zu %7.3f %8.2f %6zu %8zu %6zu %8zu %7.1f%% %6.2f\n",
               r["case"].get<std::string>().c_str(), r["frames"].get<std::size_t>(),
               r["ate_cm"].get<double>(), r["max_error_aligned_first_300_cm"].get<double>(),
@@ -104,13 +105,14 @@ int RunLongRunBench(const ConfigOptions& config_options, const LongRunOptions& o
   for (int seed : options.seeds) {
     char laps[32];
     std::snprintf(laps, sizeof(laps), "%g", options.laps);
-    cases.push_back({std::string("room ") + laps + " laps, seed " + std::to_string(seed),
-                     {"simulation.laps=" + std::string(laps),
-                      "simulation.seed=" + std::to_string(seed)}});
+    cases.push_back(
+        {std::string("room ") + laps + " laps, seed " + std::to_string(seed),
+         {"simulation.laps=" + std::string(laps), "simulation.seed=" + std::to_string(seed)}});
   }
-  std::printf("bench long-run: ATE [cm], max error aligned on the first 300 frames [cm], map "
-              "planes, closures, optimisation share of the run, SLAM time per frame last 500 / "
-              "first 500 (timings depend on the machine's load)\n");
+  std::printf(
+      "bench long-run: ATE [cm], max error aligned on the first 300 frames [cm], map "
+      "planes, closures, optimisation share of the run, SLAM time per frame last 500 / "
+      "first 500 (timings depend on the machine's load)\n");
   std::printf("%-28s %6s %7s %8s %6s %8s %6s %8s %8s %6s\n", "case", "frames", "ATE", "max300",
               "planes", "accepted", "false", "retract", "optimise", "t_last");
   nlohmann::json results = nlohmann::json::array();

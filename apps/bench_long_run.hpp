@@ -13,10 +13,10 @@
 namespace planeslam::app::bench {
 
 struct LongRunOptions {
-  double laps = 15.0;                 ///< of the long room runs
-  std::vector<int> seeds{1, 2, 3, 4};  ///< noise seeds of the long room runs
+  double laps = 15.0;                      ///< of the long room runs
+  std::vector<int> seeds{1, 2, 3, 4};      ///< noise seeds of the long room runs
   std::vector<int> injected{10, 50, 200};  ///< false closures injected into the built-in room
-  std::string json_path;              ///< empty = none
+  std::string json_path;                   ///< empty = none
   bool quiet = false;
 };
 

@@ -45,8 +45,8 @@ void WriteClosuresCsv(const std::string& path, const mapping::SlamSystem& slam,
     const Eigen::Quaterniond q(r.T_from_to.rotation());
     const Eigen::Vector3d t = r.T_from_to.translation();
     out << r.from_frame << "," << r.to_frame << "," << r.from_keyframe << "," << r.to_keyframe;
-    for (double v : {t.x(), t.y(), t.z(), q.x(), q.y(), q.z(), q.w(), r.chi2_trajectory,
-                     r.chi2_residual}) {
+    for (double v :
+         {t.x(), t.y(), t.z(), q.x(), q.y(), q.z(), q.w(), r.chi2_trajectory, r.chi2_residual}) {
       out << "," << ds::FormatRoundTrip(v);
     }
     out << "," << r.support << "," << mapping::ClosureStatusName(r.status) << ",\"" << r.reason
@@ -79,26 +79,22 @@ nlohmann::json ClosuresJson(const mapping::SlamSystem& slam, const ds::Trajector
     if (accepted && !truth.correct) ++false_accepted;
     if (r.status == mapping::ClosureStatus::kRejected && truth.correct) ++true_rejected;
   }
-  nlohmann::json json = {{"hypotheses", slam.closures().size()},
-                         {"accepted", by_status["accepted"]},
-                         {"rejected", by_status["rejected"]},
-                         {"retracted", by_status["retracted"]},
-                         {"pending", by_status["pending"]},
-                         {"injected", slam.stats().closures_injected},
-                         {"injected_accepted", injected_accepted},
-                         {"reasons", reasons}};
+  nlohmann::json json = {
+      {"hypotheses", slam.closures().size()},   {"accepted", by_status["accepted"]},
+      {"rejected", by_status["rejected"]},      {"retracted", by_status["retracted"]},
+      {"pending", by_status["pending"]},        {"injected", slam.stats().closures_injected},
+      {"injected_accepted", injected_accepted}, {"reasons", reasons}};
   if (judged > 0) {
-    json["ground_truth"] = {{"judged", judged},
-                            {"false_accepted", false_accepted},
-                            {"true_rejected", true_rejected}};
+    json["ground_truth"] = {
+        {"judged", judged}, {"false_accepted", false_accepted}, {"true_rejected", true_rejected}};
   }
   return json;
 }
 
 nlohmann::json BackEndJson(const mapping::SlamSystem& slam) {
   const mapping::SlamStats& stats = slam.stats();
-  const double timed = static_cast<double>(
-      std::min<std::size_t>(stats.frames, mapping::SlamStats::kTimedFrames));
+  const double timed =
+      static_cast<double>(std::min<std::size_t>(stats.frames, mapping::SlamStats::kTimedFrames));
   return {{"optimizations", stats.optimizations},
           {"local_optimizations", stats.local_optimizations},
           {"map_splits", stats.map_splits},

@@ -561,8 +561,9 @@ int PlaneMap::SplitContradicted() {
       const double range = obs.stats_sensor.centroid.norm();
       const double offset =
           std::abs(planes_[i].normal.dot(T * obs.stats_sensor.centroid) - planes_[i].d);
-      const bool agrees = planes_[i].normal.dot(T.linear() * obs.normal_sensor) >= cos_gate &&
-                          offset <= config_.max_offset + config_.max_offset_range_coeff * range * range;
+      const bool agrees =
+          planes_[i].normal.dot(T.linear() * obs.normal_sensor) >= cos_gate &&
+          offset <= config_.max_offset + config_.max_offset_range_coeff * range * range;
       (agrees ? keep : leave).push_back(std::move(obs));
     }
     if (leave.empty() || keep.empty()) {

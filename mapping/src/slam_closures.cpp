@@ -127,7 +127,8 @@ void SlamSystem::InjectFalseClosures(const Keyframe& current, SlamFrameResult* r
   while (current.id >= 2 && next_injection_ < injection_frames_.size() &&
          injection_frames_[next_injection_] <= current.frame) {
     ++next_injection_;
-    const auto old_id = static_cast<std::int64_t>(Uniform(rng) * static_cast<double>(current.id - 1));
+    const auto old_id =
+        static_cast<std::int64_t>(Uniform(rng) * static_cast<double>(current.id - 1));
     Vector6d error;
     error.head<3>() = (0.1 + 0.9 * Uniform(rng)) * RandomDirection(rng);
     error.tail<3>() = (2.0 + 18.0 * Uniform(rng)) * kDegToRad * RandomDirection(rng);
@@ -136,12 +137,12 @@ void SlamSystem::InjectFalseClosures(const Keyframe& current, SlamFrameResult* r
     record.to_keyframe = current.id;
     record.from_frame = keyframes_[static_cast<std::size_t>(old_id)].frame;
     record.to_frame = current.frame;
-    record.T_from_to = registration::BoxPlus(
-        KeyframePose(old_id).inverse() * KeyframePose(current.id), error);
+    record.T_from_to =
+        registration::BoxPlus(KeyframePose(old_id).inverse() * KeyframePose(current.id), error);
     const auto verified = std::find_if(closures_.rbegin(), closures_.rend(),
                                        [](const LoopClosureRecord& r) { return !r.injected; });
-    record.covariance = verified != closures_.rend() ? verified->covariance
-                                                     : DiagonalCovariance(0.01, 0.005);
+    record.covariance =
+        verified != closures_.rend() ? verified->covariance : DiagonalCovariance(0.01, 0.005);
     record.injected = true;
     ++stats_.closures_injected;
     ProposeClosure(std::move(record), result);
@@ -187,10 +188,10 @@ bool SlamSystem::PairConsistent(std::size_t a, std::size_t b) {
   };
   // Cycle from A's old keyframe: A's closure, the chain between the new keyframes, B's closure
   // backwards, the chain between the old keyframes backwards.
-  const UncertainPose cycle = Compose(
-      Compose(Compose(UncertainPose{A.T_from_to, A.covariance}, relative(A.to_keyframe, B.to_keyframe)),
-              Invert(UncertainPose{B.T_from_to, B.covariance})),
-      Invert(relative(A.from_keyframe, B.from_keyframe)));
+  const UncertainPose cycle = Compose(Compose(Compose(UncertainPose{A.T_from_to, A.covariance},
+                                                      relative(A.to_keyframe, B.to_keyframe)),
+                                              Invert(UncertainPose{B.T_from_to, B.covariance})),
+                                      Invert(relative(A.from_keyframe, B.from_keyframe)));
   const bool consistent = IdentityChi2(cycle) <= config_.loop_consistency_chi2;
   pair_consistent_[{a, b}] = consistent;
   return consistent;
@@ -220,9 +221,10 @@ int SlamSystem::DecideClosures(std::int64_t current_id, SlamFrameResult* result)
 
   int accepted = 0;
   std::vector<std::size_t> still_pending;
-  const std::size_t frame = keyframes_[static_cast<std::size_t>(std::min<std::int64_t>(
-                                           current_id, static_cast<std::int64_t>(keyframes_.size()) - 1))]
-                                .frame;
+  const std::size_t frame =
+      keyframes_[static_cast<std::size_t>(std::min<std::int64_t>(
+                     current_id, static_cast<std::int64_t>(keyframes_.size()) - 1))]
+          .frame;
   for (std::size_t k = 0; k < n; ++k) {
     const std::size_t index = window[k];
     LoopClosureRecord& record = closures_[index];
@@ -273,9 +275,11 @@ void SlamSystem::OptimizeAfterClosures(int accepted, SlamFrameResult* result) {
       const LoopClosureRecord& record = closures_[k];
       if (record.status != ClosureStatus::kAccepted || record.to_keyframe != current_id) continue;
       --accepted;
-      const Vector6d e = registration::BoxMinus(
-          record.T_from_to, KeyframePose(record.from_keyframe).inverse() * KeyframePose(current_id));
-      whole = e.dot(InformationFromCovariance(record.covariance) * e) > config_.loop_consistency_chi2;
+      const Vector6d e =
+          registration::BoxMinus(record.T_from_to, KeyframePose(record.from_keyframe).inverse() *
+                                                       KeyframePose(current_id));
+      whole =
+          e.dot(InformationFromCovariance(record.covariance) * e) > config_.loop_consistency_chi2;
     }
   }
   if (whole) Optimize();
@@ -301,9 +305,9 @@ int SlamSystem::RetractOutliers(std::int64_t first_checked, std::size_t frame) {
       continue;
     }
     LoopClosureRecord& record = closures_[found->second];
-    record.chi2_residual =
-        EvaluateEdgeResidual(edge, ToAmbient(KeyframePose(edge.from)), ToAmbient(KeyframePose(edge.to)))
-            .residual.squaredNorm();
+    record.chi2_residual = EvaluateEdgeResidual(edge, ToAmbient(KeyframePose(edge.from)),
+                                                ToAmbient(KeyframePose(edge.to)))
+                               .residual.squaredNorm();
     if (record.chi2_residual <= config_.loop_consistency_chi2) {
       ++k;
       continue;

@@ -1,11 +1,12 @@
 // Loop closures as hypotheses: the maximum clique (against brute force on random graphs), the
 // first-order propagation of Compose / Invert (against finite differences), the chi-square of a
 // cycle, and the graph's chain covariances.
+#include "planeslam/mapping/closure_consistency.hpp"
+
 #include <gtest/gtest.h>
 
 #include <random>
 
-#include "planeslam/mapping/closure_consistency.hpp"
 #include "planeslam/registration/geometry.hpp"
 
 namespace planeslam::mapping {

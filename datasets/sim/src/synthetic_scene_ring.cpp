@@ -1,8 +1,9 @@
 // The aliasing scene: an octagonal ring corridor of eight identical segments.
+#include "synthetic_scene_ring.hpp"
+
 #include <cmath>
 
 #include "planeslam/datasets/errors.hpp"
-#include "synthetic_scene_ring.hpp"
 
 namespace planeslam::datasets {
 namespace {
@@ -96,8 +97,8 @@ SyntheticScene MakeRingCorridor() {
                                      (H / 2) * uz, side * along);
     b.AddPiece(outer_wall, RingBuilder::Rect(wall + (door + side) * along + (H / 2) * uz,
                                              (H / 2) * uz, side * along));
-    b.AddPiece(outer_wall, RingBuilder::Rect(wall + ((hd + H) / 2) * uz, ((H - hd) / 2) * uz,
-                                             door * along));
+    b.AddPiece(outer_wall,
+               RingBuilder::Rect(wall + ((hd + H) / 2) * uz, ((H - hd) / 2) * uz, door * along));
     b.AddRect(name + ".door", wall + depth * radial + (hd / 2) * uz, (hd / 2) * uz, door * along);
     b.AddRect(name + ".jamb0", wall + (depth / 2) * radial - door * along + (hd / 2) * uz,
               (hd / 2) * uz, (depth / 2) * radial);
