@@ -12,6 +12,7 @@
 
 #include "exit_codes.hpp"
 #include "bench_common.hpp"
+#include "bench_long_run.hpp"
 #include "bench_odometry.hpp"
 #include "bench_quality.hpp"
 #include "cli_common.hpp"
@@ -134,10 +135,23 @@ class BenchCommand : public Command {
         "what filled it, and each method's drift from the first to the last frame.\n"
         "\nExample:\n"
         "  planeslam bench odometry ../shared/data/tum_fr3_structure_notexture_far --out odo/");
+    long_run_ = sub.add_subcommand(
+        "long-run", "Long runs and wrong loop closures: many-lap room, injected false closures, "
+                    "the aliasing ring");
+    long_run_->add_option("--laps", long_run_options_.laps, "laps of the long room runs");
+    long_run_->add_option("--seeds", long_run_options_.seeds, "noise seeds of the long room runs");
+    long_run_->add_option("--inject", long_run_options_.injected,
+                          "false closures injected into the built-in room, one run each");
+    long_run_->add_option("--json", long_run_options_.json_path, "write the results as JSON");
+    AddConfigOptions(*long_run_, long_run_config_);
   }
 
   int Run() override {
     if (detect_->parsed()) return quality_ ? RunQuality() : RunDetect();
+    if (long_run_->parsed()) {
+      long_run_options_.quiet = long_run_config_.quiet;
+      return bench::RunLongRunBench(long_run_config_, long_run_options_);
+    }
     return RunOdometry();
   }
 
@@ -384,6 +398,9 @@ class BenchCommand : public Command {
 
   CLI::App* detect_ = nullptr;
   CLI::App* odometry_ = nullptr;
+  CLI::App* long_run_ = nullptr;
+  bench::LongRunOptions long_run_options_;
+  ConfigOptions long_run_config_;
   // detect
   std::vector<std::string> frames_;
   std::string methods_;

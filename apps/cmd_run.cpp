@@ -122,7 +122,7 @@ class RunCommand : public Command {
     sub.add_option("-o,--out", out_dir_,
                    "output folder (default: output.directory, planeslam_out)");
     sub.add_option("--scene", scene_,
-                   "synthetic scene when no SEQUENCE: room, corridor, rubble, street");
+                   "synthetic scene when no SEQUENCE: room, corridor, rubble, street, ring");
     sub.add_option("--method", method_, "plane detector (default: detection.method)");
     sub.add_flag("--no-report", no_report_, "do not write report.html (as report.enabled: false)");
     AddSensorOption(sub, sensor_);
@@ -163,6 +163,7 @@ class RunCommand : public Command {
     const RunInput input = OpenInput(sequence_, scene_, config);
     const std::vector<std::size_t> indices = FrameIndices(input, run);
     RunSession session(config, method, input.name);
+    session.PlanRun(indices.size());
     if (run.start_at_ground_truth) {
       if (auto gt = input.sequence->GroundTruth(indices.front())) session.SetInitialPose(*gt);
     }

@@ -35,7 +35,7 @@ class SimulateCommand : public Command {
  public:
   std::string Name() const override { return "simulate"; }
   std::string Summary() const override {
-    return "Synthetic sequence (room, corridor, rubble, street) with exact poses, plane labels and "
+    return "Synthetic sequence (room, corridor, rubble, street, ring) with exact poses, plane labels and "
            "planes";
   }
   int Order() const override { return 40; }
@@ -45,7 +45,7 @@ class SimulateCommand : public Command {
                    "room (office-like), corridor (degenerate), rubble (unstructured), street "
                    "(urban block, 64-beam LiDAR)")
         ->required()
-        ->check(CLI::IsMember({"room", "corridor", "rubble", "street"}));
+        ->check(CLI::IsMember({"room", "corridor", "rubble", "street", "ring"}));
     sub.add_option("-o,--out", out_, "output folder (created)")->required();
     sub.add_option("--frames", frames_, "number of frames (default: the scene's whole path)")
         ->check(CLI::Range(1, 1000000));

@@ -67,6 +67,21 @@ void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
           "[m] assumed drift (1-sigma) of the relative pose to a loop candidate", 1e-6, 100.0);
   v.Field("loop_prior_rotation_sigma", c.loop_prior_rotation_sigma, "[rad] same for rotation", 1e-6,
           10.0);
+  v.Field("loop_consistency_chi2", c.loop_consistency_chi2,
+          "[-] chi-square (6 dof) of the closure tests: against the trajectory, pairwise (PCM), "
+          "and the residual after optimisation above which a closure is retracted",
+          1e-3, 1e12);
+  v.Field("loop_min_support", c.loop_min_support,
+          "[closures] a mutually consistent set is accepted once it holds this many", 1, 1000);
+  v.Field("loop_window_keyframes", c.loop_window_keyframes,
+          "[keyframes] a closure hypothesis waits this long for support", 0, 1000000);
+  v.Field("local_window_keyframes", c.local_window_keyframes,
+          "[keyframes] after accepted closures optimise this many latest keyframes, the whole "
+          "graph only when they leave a closure unsatisfied (0 = always the whole graph)",
+          0, 1000000);
+  v.Field("inject_false_closures", c.inject_false_closures,
+          "[closures] test hook: offer this many seeded wrong loop closures over the run", 0,
+          1000000);
 }
 
 std::vector<std::string> ValidateSlam(const mapping::SlamConfig& c) { return c.Validate(); }

@@ -12,8 +12,8 @@ namespace ds = planeslam::datasets;
 
 void VisitSimulation(FieldVisitor& v, SimulationConfig& c) {
   v.Field("scene", c.scene,
-          "synthetic world: room (office), corridor (degenerate), rubble, street (LiDAR)",
-          {"room", "corridor", "rubble", "street"});
+          "synthetic world: room (office), corridor (degenerate), rubble, street (LiDAR), ring (aliasing)",
+          {"room", "corridor", "rubble", "street", "ring"});
   v.Field("seed", c.seed, "seed of the rubble and street layouts and the sensor noise [-]", 0,
           2147483647);
   v.Field("sensor", c.sensor,

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli_common.hpp"
+#include "closure_report.hpp"
 #include "config_sections_app.hpp"
 #include "config_sections_mapping.hpp"
 #include "detector_factory.hpp"
@@ -40,7 +41,7 @@ void LogFrame(std::size_t index, double timestamp, const mapping::SlamFrameResul
   log << index << "," << ds::FormatRoundTrip(timestamp) << "," << result.keyframe << ","
       << result.planes << "," << result.matches << "," << result.tracked << "," << result.degenerate
       << "," << result.used_point_to_plane << "," << result.loop_closures << "," << result.refused
-      << ",ok\n";
+      << "," << result.closures_rejected << "," << result.closures_retracted << ",ok\n";
 }
 
 /// The trajectory, plane map, pose graph, effective configuration and frame log.
@@ -133,13 +134,15 @@ RunSession::RunSession(Config config, const std::string& method, std::string inp
   keep_keyframe_clouds_ = want_octomap_ || (report.enabled && report.cloud_points > 0);
   keyframe_voxel_ = want_octomap_ ? octomap.downsample_voxel : 0.05;
   frame_log_ << "index,timestamp,keyframe,planes,matches,tracked,degenerate,point_to_plane,"
-                "loop_closures,refused,status\n";
+                "loop_closures,refused,closures_rejected,closures_retracted,status\n";
   wall_start_ = Clock::now();
 }
 
 RunSession::~RunSession() = default;
 
 const RunConfig& RunSession::run_config() const { return config_.Get<RunConfig>("run"); }
+
+void RunSession::PlanRun(std::size_t frames) { slam_->PlanRun(frames); }
 
 void RunSession::SetInitialPose(const Pose& T_world_first) {
   slam_->SetInitialPose(T_world_first);
@@ -164,7 +167,7 @@ mapping::SlamFrameResult RunSession::Track(std::size_t index, ds::Frame& frame) 
 }
 
 void RunSession::RecordBadFrame(BadFrame bad, bool stop) {
-  frame_log_ << bad.index << "," << ds::FormatRoundTrip(bad.timestamp) << ",,,,,,,,,"
+  frame_log_ << bad.index << "," << ds::FormatRoundTrip(bad.timestamp) << ",,,,,,,,,,,"
              << (stop ? "stopped" : "skipped") << "\n";
   bad_frames_.push_back(std::move(bad));
   stopped_at_bad_frame_ = stop;
@@ -187,6 +190,7 @@ std::string RunSession::Write(const std::string& out_dir) {
   EnsureDirectory(out_dir);
   const ds::Trajectory estimate = slam_->EstimatedTrajectory();
   WriteMapOutputs(out_dir, *slam_, estimate, config_, frame_log_.str());
+  WriteClosuresCsv(out_dir + "/closures.csv", *slam_, ground_truth_);
   if (!ground_truth_.empty()) {
     ds::WriteTumTrajectory(out_dir + "/ground_truth_tum.txt", ground_truth_);
   }
@@ -238,6 +242,8 @@ std::string RunSession::Write(const std::string& out_dir) {
         {"optimize", stats.time_optimize_ms + finish_ms_},
         {"write", write_ms_}}},
       {"frames_per_second", done_ / std::max(wall_seconds_, 1e-9)}};
+  summary["closures"] = ClosuresJson(*slam_, ground_truth_);
+  summary["back_end"] = BackEndJson(*slam_);
   if (!metrics.is_null()) summary["metrics"] = metrics;
   ds::WriteFileAtomic(out_dir + "/summary.json", summary.dump(2) + "\n");
   if (!metrics.is_null()) ds::WriteFileAtomic(out_dir + "/metrics.json", metrics.dump(2) + "\n");
@@ -263,6 +269,9 @@ void RunSession::PrintReport(const std::string& ate_line, const std::string& out
   std::printf("loop candidates %zu, refused: degenerate %zu, few matches %zu, residual %zu\n",
               stats.loop_candidates, stats.loop_refused_degenerate, stats.loop_refused_matches,
               stats.loop_refused_residual);
+  std::printf("closure hypotheses %zu: accepted %zu, rejected %zu, retracted %zu (closures.csv)\n",
+              slam_->closures().size(), stats.loop_closures, stats.closures_rejected,
+              stats.closures_retracted);
   if (!bad_frames_.empty() && !stopped_at_bad_frame_) {
     std::printf("SKIPPED %zu unreadable frame(s):", bad_frames_.size());
     for (const BadFrame& b : bad_frames_) std::printf(" %zu", b.index);

@@ -47,6 +47,8 @@ class RunSession {
 
   /// Pose of the first frame in the world; call before the first Track.
   void SetInitialPose(const Pose& T_world_first);
+  /// Number of frames the run will have (places the test hook's injected false closures).
+  void PlanRun(std::size_t frames);
 
   /// Decimates (run.decimation), detects and tracks one frame; records it in frames.csv, keeps
   /// its ground-truth pose for the scores and, for a keyframe, its thinned cloud for the OctoMap.

@@ -523,29 +523,88 @@ FrameAssociation PlaneMap::AddFrame(std::int64_t keyframe_id, const Pose& T_worl
 }
 
 int PlaneMap::Refit(const std::unordered_map<std::int64_t, Pose>& T_world_keyframe) {
+  // Only the planes seen from a keyframe that moved are re-fitted and compared again: after a
+  // windowed optimisation that is the window's planes, so the cost follows the window.
+  std::unordered_set<std::int64_t> moved;
   for (const auto& [id, pose] : T_world_keyframe) {
     PLANESLAM_CHECK(pose.matrix().allFinite(), "pose of keyframe " << id << " not finite");
     const auto it = keyframe_poses_.find(id);
-    if (it != keyframe_poses_.end()) it->second = pose;
+    if (it == keyframe_poses_.end() || it->second.matrix() == pose.matrix()) continue;
+    it->second = pose;
+    moved.insert(id);
   }
-  for (auto& plane : planes_) RefitPlane(plane);
-  for (const auto& plane : planes_) RebuildExtent(plane);
-  return MergeCoincidentPlanes(config_.refit_merge_across_gaps_offset);
+  std::unordered_set<int> changed;
+  for (auto& plane : planes_) {
+    const bool seen_moving =
+        std::any_of(plane.observations.begin(), plane.observations.end(),
+                    [&](const PlaneObservation& obs) { return moved.count(obs.keyframe_id) != 0; });
+    if (!seen_moving) continue;
+    RefitPlane(plane);
+    RebuildExtent(plane);
+    changed.insert(plane.id);
+  }
+  return MergeCoincident(config_.refit_merge_across_gaps_offset, &changed);
+}
+
+int PlaneMap::SplitContradicted() {
+  // An observation contradicts its plane when, at the current poses, it would no longer pass the
+  // association gates (normal angle, centroid offset with the range term). The contradicting
+  // observations of a plane leave it together as a new plane: the merge that joined them is
+  // undone, and both parts are re-fitted.
+  const double cos_gate = std::cos(config_.max_normal_angle_deg * kDegToRad);
+  int splits = 0;
+  const std::size_t existing = planes_.size();
+  for (std::size_t i = 0; i < existing; ++i) {
+    std::vector<PlaneObservation> keep, leave;
+    for (PlaneObservation& obs : planes_[i].observations) {
+      const Pose& T = KeyframePose(obs.keyframe_id);
+      const double range = obs.stats_sensor.centroid.norm();
+      const double offset =
+          std::abs(planes_[i].normal.dot(T * obs.stats_sensor.centroid) - planes_[i].d);
+      const bool agrees =
+          planes_[i].normal.dot(T.linear() * obs.normal_sensor) >= cos_gate &&
+          offset <= config_.max_offset + config_.max_offset_range_coeff * range * range;
+      (agrees ? keep : leave).push_back(std::move(obs));
+    }
+    if (leave.empty() || keep.empty()) {
+      auto& observations = planes_[i].observations;
+      observations = keep.empty() ? std::move(leave) : std::move(keep);
+      continue;
+    }
+    planes_[i].observations = std::move(keep);
+    RefitPlane(planes_[i]);
+    RebuildExtent(planes_[i]);
+    MapPlane split;
+    split.id = next_id_++;
+    split.observations = std::move(leave);
+    RefitPlane(split);
+    planes_.push_back(std::move(split));
+    extents_.emplace_back();
+    RebuildExtent(planes_.back());
+    ++splits;
+  }
+  return splits;
 }
 
 int PlaneMap::MergeCoincidentPlanes(double across_gaps_offset) {
+  return MergeCoincident(across_gaps_offset, nullptr);
+}
+
+int PlaneMap::MergeCoincident(double across_gaps_offset, std::unordered_set<int>* changed) {
   int merges = 0;
-  bool changed = true;
-  while (changed) {
-    changed = false;
-    for (std::size_t i = 0; i < planes_.size() && !changed; ++i) {
-      for (std::size_t j = i + 1; j < planes_.size() && !changed; ++j) {
+  bool merged = true;
+  while (merged) {
+    merged = false;
+    for (std::size_t i = 0; i < planes_.size() && !merged; ++i) {
+      for (std::size_t j = i + 1; j < planes_.size() && !merged; ++j) {
+        if (changed && !changed->count(planes_[i].id) && !changed->count(planes_[j].id)) continue;
         if (Coincide(planes_[i], planes_[j], across_gaps_offset) ||
             Coincide(planes_[j], planes_[i], across_gaps_offset)) {
           const bool i_first = planes_[i].id < planes_[j].id;
+          if (changed) changed->insert(i_first ? planes_[i].id : planes_[j].id);
           MergeInto(i_first ? i : j, i_first ? j : i);
           ++merges;
-          changed = true;
+          merged = true;
         }
       }
     }

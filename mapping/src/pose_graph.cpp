@@ -9,6 +9,7 @@
 #include <cmath>
 #include <map>
 #include <memory>
+#include <unordered_set>
 
 #include "planeslam/datasets/errors.hpp"
 
@@ -229,8 +230,12 @@ struct BuiltProblem {
   std::size_t num_fixed = 0;
 };
 
+/// With `free_nodes`, only those nodes are optimised: edges between held nodes are left out, as
+/// are held nodes' plane observations, and a landmark seen from a held node is held too (its
+/// value rests on observations outside the window).
 BuiltProblem BuildProblem(const PoseGraph& graph, const PoseGraphConfig& config,
-                          std::vector<PlaneLandmark>* planes = nullptr) {
+                          std::vector<PlaneLandmark>* planes = nullptr,
+                          const std::unordered_set<std::int64_t>* free_nodes = nullptr) {
   BuiltProblem built;
   const auto& nodes = graph.nodes();
   built.positions.resize(nodes.size());
@@ -249,7 +254,9 @@ BuiltProblem BuildProblem(const PoseGraph& graph, const PoseGraphConfig& config,
   ceres::Problem& problem = *built.problem;
   ceres::LossFunction* loop_loss = MakeLoopClosureLoss(config);
   bool loss_used = false;
+  const auto is_free = [&](std::int64_t id) { return !free_nodes || free_nodes->count(id) != 0; };
   for (const auto& edge : graph.edges()) {
+    if (!is_free(edge.from) && !is_free(edge.to)) continue;
     const std::size_t a = index.at(edge.from);
     const std::size_t b = index.at(edge.to);
     ceres::LossFunction* loss = edge.kind == EdgeKind::kLoopClosure ? loop_loss : nullptr;
@@ -261,10 +268,12 @@ BuiltProblem BuildProblem(const PoseGraph& graph, const PoseGraphConfig& config,
   if (planes) {
     for (PlaneLandmark& plane : *planes) {
       plane.normal.normalize();
+      const bool held = std::any_of(plane.observations.begin(), plane.observations.end(),
+                                    [&](const auto& obs) { return !is_free(obs.node); });
       int used = 0;
       for (const PlaneLandmarkObservation& obs : plane.observations) {
         const auto it = index.find(obs.node);
-        if (it == index.end()) continue;
+        if (it == index.end() || !is_free(obs.node)) continue;
         const std::size_t a = it->second;
         problem.AddResidualBlock(PlaneObservationError::Create(obs), loop_loss,
                                  built.positions[a].data(), built.rotations[a].coeffs().data(),
@@ -272,7 +281,12 @@ BuiltProblem BuildProblem(const PoseGraph& graph, const PoseGraphConfig& config,
         loss_used |= loop_loss != nullptr;
         ++used;
       }
-      if (used > 0) problem.SetManifold(plane.normal.data(), new ceres::SphereManifold<3>);
+      if (used > 0 && held) {
+        problem.SetParameterBlockConstant(plane.normal.data());
+        problem.SetParameterBlockConstant(&plane.d);
+      } else if (used > 0) {
+        problem.SetManifold(plane.normal.data(), new ceres::SphereManifold<3>);
+      }
     }
   }
   if (!loss_used) delete loop_loss;
@@ -287,7 +301,7 @@ BuiltProblem BuildProblem(const PoseGraph& graph, const PoseGraphConfig& config,
   // Gauge: the FIX nodes, else the first node (as g2o does).
   std::vector<std::size_t> fixed;
   for (std::size_t i = 0; i < nodes.size(); ++i) {
-    if (nodes[i].fixed) fixed.push_back(i);
+    if (nodes[i].fixed || !is_free(nodes[i].id)) fixed.push_back(i);
   }
   if (fixed.empty() && !nodes.empty()) fixed.push_back(0);
   for (std::size_t i : fixed) {
@@ -303,6 +317,13 @@ BuiltProblem BuildProblem(const PoseGraph& graph, const PoseGraphConfig& config,
 
 PoseGraphResult OptimizePoseGraph(PoseGraph& graph, const PoseGraphConfig& config,
                                   std::vector<PlaneLandmark>* planes) {
+  return OptimizePoseGraphWindow(graph, nullptr, config, planes);
+}
+
+PoseGraphResult OptimizePoseGraphWindow(PoseGraph& graph,
+                                        const std::unordered_set<std::int64_t>* free_nodes,
+                                        const PoseGraphConfig& config,
+                                        std::vector<PlaneLandmark>* planes) {
   const auto problems = config.Validate();
   PLANESLAM_CHECK(problems.empty(), "invalid PoseGraphConfig: " << problems.front());
   PoseGraphResult result;
@@ -310,7 +331,7 @@ PoseGraphResult OptimizePoseGraph(PoseGraph& graph, const PoseGraphConfig& confi
   result.num_edges = graph.edges().size();
   // Landmarks are optimised in a copy, written back only with a usable solution.
   std::vector<PlaneLandmark> landmarks = planes ? *planes : std::vector<PlaneLandmark>();
-  BuiltProblem built = BuildProblem(graph, config, planes ? &landmarks : nullptr);
+  BuiltProblem built = BuildProblem(graph, config, planes ? &landmarks : nullptr, free_nodes);
   result.num_fixed = built.num_fixed;
   if (graph.edges().empty()) {
     result.converged = true;

@@ -5,42 +5,14 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <unordered_set>
 
 #include "planeslam/datasets/errors.hpp"
+#include "slam_internal.hpp"
 
 namespace planeslam::mapping {
-namespace {
 
-constexpr double kDegToRad = M_PI / 180.0;
-
-double ElapsedMs(std::chrono::steady_clock::time_point since) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - since)
-      .count();
-}
-
-double RotationAngle(const Pose& T) { return Eigen::AngleAxisd(T.rotation()).angle(); }
-
-Matrix6d DiagonalCovariance(double translation_sigma, double rotation_sigma) {
-  Vector6d diag;
-  diag << Eigen::Vector3d::Constant(translation_sigma * translation_sigma),
-      Eigen::Vector3d::Constant(rotation_sigma * rotation_sigma);
-  return diag.asDiagonal();
-}
-
-/// Edge information from a registration covariance. Registration reports (dt, dtheta) in the
-/// previous frame with additive translation and left-perturbed rotation, which is exactly the
-/// pose-graph residual's parameterisation (q_a^-1 (p_b - p_a) - p_ab; 2 vec(q_meas q_est^-1)).
-Matrix6d InformationFromCovariance(const Matrix6d& covariance) {
-  Matrix6d symmetric = 0.5 * (covariance + covariance.transpose());
-  Matrix6d information = symmetric.ldlt().solve(Matrix6d::Identity());
-  information = 0.5 * (information + information.transpose());
-  // Guard against a numerically indefinite result: floor the spectrum.
-  Eigen::SelfAdjointEigenSolver<Matrix6d> eig(information);
-  const Vector6d values = eig.eigenvalues().cwiseMax(1e-6);
-  return eig.eigenvectors() * values.asDiagonal() * eig.eigenvectors().transpose();
-}
-
-}  // namespace
+using namespace slam_internal;  // NOLINT: the helpers shared with slam_closures.cpp
 
 std::vector<std::string> SlamConfig::Validate() const {
   std::vector<std::string> problems;
@@ -58,6 +30,11 @@ std::vector<std::string> SlamConfig::Validate() const {
   if (loop_min_matches < 3) problems.push_back("loop_min_matches must be >= 3");
   if (loop_min_keyframe_gap < 1) problems.push_back("loop_min_keyframe_gap must be >= 1");
   if (!(velocity_window >= 0)) problems.push_back("velocity_window must be >= 0");
+  if (!(loop_consistency_chi2 > 0)) problems.push_back("loop_consistency_chi2 must be > 0");
+  if (loop_min_support < 1) problems.push_back("loop_min_support must be >= 1");
+  if (loop_window_keyframes < 0) problems.push_back("loop_window_keyframes must be >= 0");
+  if (local_window_keyframes < 0) problems.push_back("local_window_keyframes must be >= 0");
+  if (inject_false_closures < 0) problems.push_back("inject_false_closures must be >= 0");
   return problems;
 }
 
@@ -74,6 +51,7 @@ SlamSystem::SlamSystem(const SlamConfig& config, const registration::Association
       velocity_(config.velocity_window) {
   const auto problems = config_.Validate();
   PLANESLAM_CHECK(problems.empty(), problems.front());
+  paths_ = std::make_unique<GraphPaths>(graph_, kPathSearchNodes);
 }
 
 void SlamSystem::AddKeyframe(std::size_t frame, const Pose& T_world_sensor,
@@ -97,6 +75,21 @@ void SlamSystem::AddKeyframe(std::size_t frame, const Pose& T_world_sensor,
 
 SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::OrganizedCloud& cloud,
                                          const detection::Segmentation& segmentation) {
+  const auto start = std::chrono::steady_clock::now();
+  SlamFrameResult result = TrackFrame(timestamp, cloud, segmentation);
+  const double ms = ElapsedMs(start);
+  if (stats_.frames <= SlamStats::kTimedFrames) stats_.time_first_frames_ms += ms;
+  recent_frame_ms_.push_back(ms);
+  stats_.time_last_frames_ms += ms;
+  if (recent_frame_ms_.size() > SlamStats::kTimedFrames) {
+    stats_.time_last_frames_ms -= recent_frame_ms_.front();
+    recent_frame_ms_.pop_front();
+  }
+  return result;
+}
+
+SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::OrganizedCloud& cloud,
+                                       const detection::Segmentation& segmentation) {
   SlamFrameResult result;
   result.index = frames_.size();
   result.timestamp = timestamp;
@@ -197,6 +190,7 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
   const Keyframe& current = keyframes_.back();
   graph_.AddEdge(previous_id, current.id, T_keyframe_curr, InformationFromCovariance(covariance),
                  EdgeKind::kOdometry);
+  paths_->AddEdge(graph_.edges().back());
   frames_.push_back({timestamp, current.id, Pose::Identity()});
   T_keyframe_last_ = Pose::Identity();
   covariance_keyframe_last_.setZero();
@@ -204,72 +198,16 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
 
   if (config_.loop_closure) {
     const auto loop_start = std::chrono::steady_clock::now();
-    result.loop_closures = SearchLoopClosures(current);
+    SearchLoopClosures(current, &result);
+    InjectFalseClosures(current, &result);
+    result.loop_closures = DecideClosures(current.id, &result);
     stats_.time_loop_ms += ElapsedMs(loop_start);
     if (result.loop_closures > 0) {
-      const auto optimize_start = std::chrono::steady_clock::now();
-      Optimize();
-      stats_.time_optimize_ms += ElapsedMs(optimize_start);
+      OptimizeAfterClosures(result.loop_closures, &result);
       result.T_world_sensor = KeyframePose(current.id);
     }
   }
   return result;
-}
-
-int SlamSystem::SearchLoopClosures(const Keyframe& current) {
-  const Pose T_world_current = KeyframePose(current.id);
-  struct Candidate {
-    double distance;
-    std::size_t index;
-  };
-  std::vector<Candidate> candidates;
-  for (std::size_t i = 0; i < keyframes_.size(); ++i) {
-    if (keyframes_[i].id > current.id - config_.loop_min_keyframe_gap) break;
-    const Pose T_world_old = KeyframePose(keyframes_[i].id);
-    const double distance = (T_world_old.translation() - T_world_current.translation()).norm();
-    const double angle = RotationAngle(T_world_old.inverse() * T_world_current);
-    if (distance < config_.loop_search_radius && angle < config_.loop_max_angle_deg * kDegToRad) {
-      candidates.push_back({distance, i});
-    }
-  }
-  std::sort(candidates.begin(), candidates.end(), [](const Candidate& a, const Candidate& b) {
-    return a.distance < b.distance || (a.distance == b.distance && a.index < b.index);
-  });
-  if (static_cast<int>(candidates.size()) > config_.loop_max_candidates) {
-    candidates.resize(config_.loop_max_candidates);
-  }
-
-  int added = 0;
-  for (const Candidate& candidate : candidates) {
-    const Keyframe& old = keyframes_[candidate.index];
-    ++stats_.loop_candidates;
-    registration::MotionPrior prior;
-    prior.T_prev_curr = KeyframePose(old.id).inverse() * T_world_current;
-    prior.covariance =
-        DiagonalCovariance(config_.loop_prior_translation_sigma, config_.loop_prior_rotation_sigma);
-    const registration::AssociationResult association = registration::AssociatePlanes(
-        old.planes, current.planes, prior, association_config_, registration_config_);
-    const registration::RegistrationResult& reg = association.registration;
-    // Only a closure the planes fully determine may correct the trajectory: a degenerate one
-    // would carry the (drifted) prior into the graph as if it were a measurement.
-    if (!reg.converged || reg.degenerate) {
-      ++stats_.loop_refused_degenerate;
-      continue;
-    }
-    if (static_cast<int>(reg.inliers.size()) < config_.loop_min_matches) {
-      ++stats_.loop_refused_matches;
-      continue;
-    }
-    if (!(reg.residual_rms < config_.loop_max_residual)) {
-      ++stats_.loop_refused_residual;
-      continue;
-    }
-    graph_.AddEdge(old.id, current.id, reg.T_prev_curr, InformationFromCovariance(reg.covariance),
-                   EdgeKind::kLoopClosure);
-    ++added;
-  }
-  stats_.loop_closures += added;
-  return added;
 }
 
 std::vector<PlaneLandmark> SlamSystem::PlaneLandmarks() const {
@@ -317,10 +255,25 @@ std::vector<PlaneLandmark> SlamSystem::PlaneLandmarks() const {
   return landmarks;
 }
 
-PoseGraphResult SlamSystem::Optimize() {
+PoseGraphResult SlamSystem::Optimize(std::int64_t first_free) {
   std::vector<PlaneLandmark> landmarks = PlaneLandmarks();
-  const PoseGraphResult result = OptimizePoseGraph(graph_, pose_graph_config_, &landmarks);
-  map_.Refit(KeyframePoses());
+  std::unordered_set<std::int64_t> free_nodes;
+  for (std::int64_t id = std::max<std::int64_t>(first_free, 0);
+       first_free >= 0 && id < static_cast<std::int64_t>(keyframes_.size()); ++id) {
+    free_nodes.insert(id);
+  }
+  const PoseGraphResult result = OptimizePoseGraphWindow(
+      graph_, first_free >= 0 ? &free_nodes : nullptr, pose_graph_config_, &landmarks);
+  if (first_free >= 0) {
+    std::unordered_map<std::int64_t, Pose> moved;
+    for (std::int64_t id : free_nodes) moved[id] = KeyframePose(id);
+    map_.Refit(moved);
+    ++stats_.local_optimizations;
+  } else {
+    map_.Refit(KeyframePoses());
+    // The whole graph moved: merges the new poses contradict are undone.
+    stats_.map_splits += static_cast<std::size_t>(map_.SplitContradicted());
+  }
   ++stats_.optimizations;
   return result;
 }
@@ -328,7 +281,17 @@ PoseGraphResult SlamSystem::Optimize() {
 PoseGraphResult SlamSystem::Finish() {
   const auto start = std::chrono::steady_clock::now();
   PoseGraphResult result;
-  if (!graph_.edges().empty()) result = Optimize();
+  if (!keyframes_.empty() && !pending_.empty()) {
+    // The run is over: hypotheses still waiting are decided now, as if their window had passed.
+    SlamFrameResult ignored;
+    DecideClosures(keyframes_.back().id + config_.loop_window_keyframes + 1, &ignored);
+  }
+  if (!graph_.edges().empty()) {
+    result = Optimize();
+    for (int round = 0; round < 3 && RetractOutliers(0, keyframes_.back().frame) > 0; ++round) {
+      result = Optimize();
+    }
+  }
   // The poses are final: coplanar parts become one plane at the loose merge offset (during SLAM
   // only at the tight one, see refit_merge_across_gaps_offset).
   const PlaneMapConfig& map_config = map_.config();

@@ -7,6 +7,7 @@
 #include "synthetic_random.hpp"
 #include "planeslam/datasets/synthetic_scene.hpp"
 #include "planeslam/datasets/synthetic_street.hpp"
+#include "synthetic_scene_ring.hpp"
 
 namespace planeslam::datasets {
 
@@ -165,6 +166,8 @@ std::string SceneName(SceneKind kind) {
       return "rubble";
     case SceneKind::kStreet:
       return "street";
+    case SceneKind::kRing:
+      return "ring";
   }
   return "room";
 }
@@ -174,8 +177,9 @@ SceneKind ParseSceneKind(const std::string& name) {
   if (name == "corridor") return SceneKind::kCorridor;
   if (name == "rubble") return SceneKind::kRubble;
   if (name == "street") return SceneKind::kStreet;
+  if (name == "ring") return SceneKind::kRing;
   throw ConfigError("unknown synthetic scene '" + name +
-                    "' (expected room, corridor, rubble or street)");
+                    "' (expected room, corridor, rubble, street or ring)");
 }
 
 double ScenePlane::Area() const {
@@ -224,6 +228,8 @@ SyntheticScene MakeScene(SceneKind kind, std::uint64_t seed) {
       return MakeRubble(seed);
     case SceneKind::kStreet:
       return MakeStreetScene(seed);
+    case SceneKind::kRing:
+      return MakeRingCorridor();
   }
   return MakeRoom();
 }

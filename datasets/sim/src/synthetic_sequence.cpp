@@ -47,6 +47,19 @@ SyntheticTrajectoryConfig DefaultTrajectory(SceneKind kind) {
       c.pitch_amplitude_deg = 5.0;
       c.yaw_amplitude_deg = 15.0;
       break;
+    case SceneKind::kRing:
+      // Forward along the middle of the ring corridor.
+      c.center = Eigen::Vector3d(0.0, 0.0, 1.4);
+      c.radius = 1.8;
+      c.start_angle_deg = 0.0;
+      c.look = "forward";
+      c.speed = 0.6;
+      c.laps = 1.3;
+      c.height_amplitude = 0.1;
+      c.pitch_deg = -5.0;
+      c.pitch_amplitude_deg = 5.0;
+      c.yaw_amplitude_deg = 15.0;
+      break;
     case SceneKind::kRubble:
       c.center = Eigen::Vector3d(0.0, 0.0, 1.6);
       c.radius = 3.8;

@@ -163,11 +163,17 @@ class PlaneMap {
                             const detection::Segmentation& segmentation,
                             const datasets::OrganizedCloud& cloud);
 
-  /// Re-fits every map plane from its observations with new keyframe poses (e.g. after pose-graph
-  /// optimisation); keyframes absent from `T_world_keyframe` keep their pose. Then merges planes
-  /// that now coincide (apart ones within refit_merge_across_gaps_offset). Returns the number of
+  /// Re-fits the map planes seen from keyframes whose pose changed from their observations with
+  /// the new keyframe poses (e.g. after pose-graph optimisation); keyframes absent from
+  /// `T_world_keyframe` keep their pose. Then merges a re-fitted plane with any plane it now
+  /// coincides with (apart ones within refit_merge_across_gaps_offset). Returns the number of
   /// merges.
   int Refit(const std::unordered_map<std::int64_t, Pose>& T_world_keyframe);
+
+  /// Undoes merges the poses now contradict: the observations of a plane that, at the current
+  /// poses, fall outside the association gates (max_normal_angle_deg; max_offset plus the range
+  /// term) become a plane of their own. Returns the number of planes split.
+  int SplitContradicted();
 
   /// Merges map planes that are one surface: within the merge thresholds and with touching
   /// extents, or with extents apart when each centroid lies within `across_gaps_offset` [m] of the
@@ -210,6 +216,9 @@ class PlaneMap {
   int CountTouching(const Extent& extent, const std::vector<Eigen::Vector3d>& world_points,
                     int enough) const;
   bool Coincide(const MapPlane& a, const MapPlane& b, double across_gaps_offset) const;
+  /// MergeCoincidentPlanes over the pairs with a plane in `changed` (all pairs when null); a
+  /// merged plane joins `changed`.
+  int MergeCoincident(double across_gaps_offset, std::unordered_set<int>* changed);
   /// Merges planes_[j] into planes_[i] (i keeps its id); erases j.
   void MergeInto(std::size_t i, std::size_t j);
   std::size_t IndexOf(int id) const;

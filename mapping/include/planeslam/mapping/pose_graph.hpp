@@ -19,6 +19,7 @@
 #include <cstdint>
 #include <string>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "planeslam/datasets/trajectory.hpp"
@@ -149,6 +150,15 @@ struct PlaneLandmark {
 /// landmarks are optimised too (written back); observations of unknown nodes are ignored.
 PoseGraphResult OptimizePoseGraph(PoseGraph& graph, const PoseGraphConfig& config = {},
                                   std::vector<PlaneLandmark>* planes = nullptr);
+
+/// Same, optimising only the nodes in `free_nodes` (all when null) with the others held: edges
+/// between held nodes and held nodes' plane observations are left out, and a landmark seen from a
+/// held node is held at its value. The cost of a window is then bounded by the window, not by the
+/// graph.
+PoseGraphResult OptimizePoseGraphWindow(PoseGraph& graph,
+                                        const std::unordered_set<std::int64_t>* free_nodes,
+                                        const PoseGraphConfig& config,
+                                        std::vector<PlaneLandmark>* planes = nullptr);
 
 /// 0.5 sum rho(|r|^2) of the graph as it is (same cost as the optimiser's).
 double PoseGraphCost(const PoseGraph& graph, const PoseGraphConfig& config = {});

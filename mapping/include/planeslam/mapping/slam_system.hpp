@@ -15,6 +15,9 @@
 /// graph is optimised and the map re-fitted.
 #include <cstddef>
 #include <cstdint>
+#include <deque>
+#include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <unordered_map>
@@ -23,6 +26,7 @@
 #include "planeslam/datasets/organized_cloud.hpp"
 #include "planeslam/datasets/trajectory.hpp"
 #include "planeslam/detection/plane.hpp"
+#include "planeslam/mapping/closure_consistency.hpp"
 #include "planeslam/mapping/plane_map.hpp"
 #include "planeslam/mapping/pose_graph.hpp"
 #include "planeslam/registration/plane_association.hpp"
@@ -109,6 +113,30 @@ struct SlamConfig {
   /// Prior uncertainty of the relative pose to a loop candidate (accumulated drift) [m], [rad].
   double loop_prior_translation_sigma = 0.3;
   double loop_prior_rotation_sigma = 0.15;
+  /// Loop closures are hypotheses (closure_consistency.hpp): a verified closure must agree with
+  /// the trajectory estimate (its covariance plus that of the best chain of edges between its two
+  /// keyframes; the drift prior above where no chain is short enough) and, pairwise, with the
+  /// other closures of a window (cycle through the odometry); the largest mutually consistent
+  /// set is accepted. Chi-square threshold of both tests (6 dof): 22.46 is the 99.9% quantile.
+  /// After each optimisation a closure whose residual exceeds it is an outlier of the robust
+  /// kernel and is retracted.
+  double loop_consistency_chi2 = 22.46;
+  /// [closures] a consistent set is accepted once it holds this many closures (accepted ones of
+  /// the window count): one registration alone never moves the map, as in ORB-SLAM's check of
+  /// consecutive consistent candidates.
+  int loop_min_support = 2;
+  /// [keyframes] a hypothesis waits this long for support before it is rejected; closures
+  /// accepted this recently support new ones.
+  int loop_window_keyframes = 8;
+  /// [keyframes] after accepted closures only this many latest keyframes are optimised first
+  /// (the rest held); when that leaves a new closure's residual above loop_consistency_chi2 the
+  /// correction reaches further back and the whole graph is optimised. 0: always the whole
+  /// graph.
+  int local_window_keyframes = 25;
+  /// Test hook: this many wrong loop closures (seeded; random keyframe pairs, relative poses off
+  /// by 0.1-1 m and 2-20 deg from the estimate, a verified closure's covariance) are offered to
+  /// the hypothesis test over the run (needs PlanRun). 0: none.
+  int inject_false_closures = 0;
   /// Problems with the values, empty when fine.
   std::vector<std::string> Validate() const;
 };
@@ -124,8 +152,33 @@ struct SlamFrameResult {
   bool tracked = false;              ///< the registration converged (else the prior was used)
   bool degenerate = false;           ///< the planes left some direction undetermined
   bool used_point_to_plane = false;  ///< a degenerate direction was filled by point alignment
-  int loop_closures = 0;             ///< verified closures added at this frame
+  int loop_closures = 0;             ///< closures accepted at this frame
   bool refused = false;              ///< the result contradicted the motion prior and was not used
+  int closures_rejected = 0;         ///< closure hypotheses rejected at this frame
+  int closures_retracted = 0;        ///< accepted closures retracted at this frame (outliers)
+};
+
+/// What became of a loop-closure hypothesis.
+enum class ClosureStatus { kPending, kAccepted, kRejected, kRetracted };
+/// "pending", "accepted", "rejected", "retracted".
+const char* ClosureStatusName(ClosureStatus status);
+
+/// One loop-closure hypothesis: a verified registration (or an injected one) and its fate.
+struct LoopClosureRecord {
+  std::int64_t from_keyframe = 0;  ///< the older keyframe
+  std::int64_t to_keyframe = 0;    ///< the new keyframe
+  std::size_t from_frame = 0;
+  std::size_t to_frame = 0;
+  Pose T_from_to = Pose::Identity();        ///< measured relative pose
+  Matrix6d covariance = Matrix6d::Zero();  ///< of the measurement (registration convention)
+  /// Chi-square against the trajectory estimate when proposed (closure + path covariance).
+  double chi2_trajectory = 0.0;
+  double chi2_residual = 0.0;  ///< whitened residual^2 after the last optimisation (accepted)
+  int support = 0;             ///< size of the consistent set that accepted it
+  ClosureStatus status = ClosureStatus::kPending;
+  std::string reason;          ///< why accepted, rejected or retracted
+  bool injected = false;       ///< a test-hook false closure
+  std::size_t decided_frame = 0;  ///< frame at which the status was last set
 };
 
 /// Summary counters of a run.
@@ -139,6 +192,11 @@ struct SlamStats {
   std::size_t loop_refused_degenerate = 0;
   std::size_t loop_refused_matches = 0;
   std::size_t loop_refused_residual = 0;
+  std::size_t closures_rejected = 0;   ///< hypotheses rejected (inconsistent or unsupported)
+  std::size_t closures_retracted = 0;  ///< accepted, then outliers of the optimisation
+  std::size_t closures_injected = 0;   ///< test-hook false closures offered
+  std::size_t local_optimizations = 0;  ///< of optimizations, windowed ones
+  std::size_t map_splits = 0;  ///< map-plane merges undone (observations no longer agreeing)
   std::size_t degenerate_frames = 0;
   std::size_t point_to_plane_frames = 0;  ///< degenerate frames filled by point alignment
   std::size_t untracked_frames = 0;       ///< no usable plane registration (prior used)
@@ -148,6 +206,10 @@ struct SlamStats {
   double time_loop_ms = 0.0;      ///< loop-closure search and verification, total
   double time_optimize_ms = 0.0;  ///< pose graph + map refit, total
   double time_map_ms = 0.0;       ///< plane map insertion, total
+  /// ProcessFrame time summed over the first and over the last kTimedFrames frames [ms].
+  static constexpr std::size_t kTimedFrames = 500;
+  double time_first_frames_ms = 0.0;
+  double time_last_frames_ms = 0.0;
 };
 
 class SlamSystem {
@@ -166,6 +228,11 @@ class SlamSystem {
   void SetInitialPose(const Pose& T_world_first) { T_world_first_ = T_world_first; }
   /// Final pose-graph optimisation and map re-fit. Returns the optimiser's result.
   PoseGraphResult Finish();
+  /// Number of frames the run will have: places the injected false closures (test hook
+  /// inject_false_closures) over the run.
+  void PlanRun(std::size_t frames);
+  /// Every loop-closure hypothesis, in the order proposed.
+  const std::vector<LoopClosureRecord>& closures() const { return closures_; }
 
   /// Every processed frame's pose: T_world_keyframe (current graph) * T_keyframe_frame.
   datasets::Trajectory EstimatedTrajectory() const;
@@ -189,13 +256,31 @@ class SlamSystem {
     Pose T_keyframe_frame = Pose::Identity();
   };
 
+  /// Nodes a path search of the consistency tests settles at most.
+  static constexpr std::size_t kPathSearchNodes = 400;
+
   Pose KeyframePose(std::int64_t id) const { return graph_.node(id).T_world_node(); }
+  SlamFrameResult TrackFrame(double timestamp, const datasets::OrganizedCloud& cloud,
+                             const detection::Segmentation& segmentation);
   void AddKeyframe(std::size_t frame, const Pose& T_world_sensor,
                    const detection::Segmentation& segmentation,
                    const datasets::OrganizedCloud& cloud);
-  int SearchLoopClosures(const Keyframe& current);
-  /// Pose graph with the plane landmarks, then the map re-fitted to the new poses.
-  PoseGraphResult Optimize();
+  /// Verifies the loop candidates of the new keyframe; the verified ones become hypotheses.
+  void SearchLoopClosures(const Keyframe& current, SlamFrameResult* result);
+  /// The planned false closures of the test hook for this keyframe.
+  void InjectFalseClosures(const Keyframe& current, SlamFrameResult* result);
+  /// New hypothesis: tested against the trajectory estimate, then pending or rejected.
+  void ProposeClosure(LoopClosureRecord record, SlamFrameResult* result);
+  /// PCM decision over the window; adds the accepted closures' edges. Returns how many.
+  int DecideClosures(std::int64_t current_id, SlamFrameResult* result);
+  bool PairConsistent(std::size_t a, std::size_t b);
+  /// Optimises after closures were accepted (window or whole graph), then retracts outliers.
+  void OptimizeAfterClosures(int accepted, SlamFrameResult* result);
+  /// Removes accepted closures whose residual exceeds loop_consistency_chi2. Returns how many.
+  int RetractOutliers(std::int64_t first_checked, std::size_t frame);
+  /// Pose graph with the plane landmarks (only the keyframes from `first_free` on when >= 0),
+  /// then the map re-fitted to the new poses.
+  PoseGraphResult Optimize(std::int64_t first_free = -1);
   /// The map planes seen from two or more keyframes, with those keyframes' detections of them.
   std::vector<PlaneLandmark> PlaneLandmarks() const;
 
@@ -219,6 +304,16 @@ class SlamSystem {
   Matrix6d covariance_keyframe_last_ = Matrix6d::Zero();  ///< of T_keyframe_last_
   int consecutive_refusals_ = 0;
   SlamStats stats_;
+  std::vector<LoopClosureRecord> closures_;
+  std::vector<std::size_t> pending_;  ///< indices into closures_ awaiting a decision
+  /// Accepted closures in the graph: (from, to) keyframes -> record.
+  std::map<std::pair<std::int64_t, std::int64_t>, std::size_t> accepted_edges_;
+  std::map<std::pair<std::size_t, std::size_t>, bool> pair_consistent_;  ///< PCM cache
+  std::unique_ptr<GraphPaths> paths_;  ///< chains of edges for the consistency tests
+  std::vector<std::size_t> injection_frames_;  ///< planned frames of injected closures, sorted
+  std::size_t next_injection_ = 0;
+  std::uint64_t injection_state_ = 0;
+  std::deque<double> recent_frame_ms_;  ///< ProcessFrame times of the last kTimedFrames frames
 };
 
 }  // namespace planeslam::mapping

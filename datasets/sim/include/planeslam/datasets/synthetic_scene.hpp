@@ -20,9 +20,10 @@ enum class SceneKind {
   kCorridor,  ///< 30 m corridor, open ends: plane registration cannot observe motion along x
   kRubble,    ///< small tilted slabs, spheres and cylinders on a ground plane: unstructured
   kStreet,    ///< urban block for LiDAR (synthetic_street.hpp)
+  kRing,      ///< octagonal ring corridor of 8 identical segments: made to fool place recognition
 };
 
-/// "room", "corridor", "rubble", "street".
+/// "room", "corridor", "rubble", "street", "ring".
 std::string SceneName(SceneKind kind);
 /// Inverse of SceneName; throws ConfigError naming the accepted values.
 SceneKind ParseSceneKind(const std::string& name);

@@ -1,0 +1,198 @@
+#include "planeslam/mapping/closure_consistency.hpp"
+
+#include <Eigen/Cholesky>
+#include <algorithm>
+#include <functional>
+#include <limits>
+#include <queue>
+
+#include "planeslam/registration/geometry.hpp"
+
+namespace planeslam::mapping {
+namespace {
+
+using registration::Skew;
+
+Matrix6d SymmetricInverse(const Matrix6d& m) {
+  const Matrix6d symmetric = 0.5 * (m + m.transpose());
+  Matrix6d inverse = symmetric.ldlt().solve(Matrix6d::Identity());
+  return 0.5 * (inverse + inverse.transpose());
+}
+
+}  // namespace
+
+UncertainPose Compose(const UncertainPose& a, const UncertainPose& b) {
+  const Eigen::Matrix3d R_a = a.T.linear();
+  Matrix6d J_a = Matrix6d::Identity();
+  J_a.topRightCorner<3, 3>() = -Skew(R_a * b.T.translation());
+  Matrix6d J_b = Matrix6d::Zero();
+  J_b.topLeftCorner<3, 3>() = R_a;
+  J_b.bottomRightCorner<3, 3>() = R_a;
+  UncertainPose c;
+  c.T = a.T * b.T;
+  c.covariance = J_a * a.covariance * J_a.transpose() + J_b * b.covariance * J_b.transpose();
+  return c;
+}
+
+UncertainPose Invert(const UncertainPose& x) {
+  const Eigen::Matrix3d Rt = x.T.linear().transpose();
+  Matrix6d J = Matrix6d::Zero();
+  J.topLeftCorner<3, 3>() = -Rt;
+  J.topRightCorner<3, 3>() = -Rt * Skew(x.T.translation());
+  J.bottomRightCorner<3, 3>() = -Rt;
+  UncertainPose inverse;
+  inverse.T = x.T.inverse();
+  inverse.covariance = J * x.covariance * J.transpose();
+  return inverse;
+}
+
+double IdentityChi2(const UncertainPose& x) {
+  const Vector6d e = registration::BoxMinus(x.T, Pose::Identity());
+  const double chi2 = e.dot(SymmetricInverse(x.covariance) * e);
+  return std::isfinite(chi2) ? chi2 : std::numeric_limits<double>::infinity();
+}
+
+GraphPaths::GraphPaths(const PoseGraph& graph, std::size_t max_nodes)
+    : graph_(graph), max_nodes_(max_nodes) {
+  for (const PoseGraphEdge& edge : graph.edges()) AddEdge(edge);
+}
+
+void GraphPaths::AddEdge(const PoseGraphEdge& edge) {
+  const UncertainPose forward{edge.T_a_b(), SymmetricInverse(edge.information)};
+  const UncertainPose backward = Invert(forward);
+  links_[edge.from].push_back({edge.to, forward.covariance, forward.covariance.trace()});
+  links_[edge.to].push_back({edge.from, backward.covariance, backward.covariance.trace()});
+}
+
+void GraphPaths::RemoveEdge(std::int64_t from, std::int64_t to) {
+  const auto erase_one = [&](std::int64_t a, std::int64_t b) {
+    std::vector<Link>& links = links_[a];
+    const auto it =
+        std::find_if(links.begin(), links.end(), [&](const Link& l) { return l.to == b; });
+    if (it != links.end()) links.erase(it);
+  };
+  erase_one(from, to);
+  erase_one(to, from);
+}
+
+std::optional<UncertainPose> GraphPaths::Relative(std::int64_t from, std::int64_t to) {
+  if (from == to) return UncertainPose{};
+  // Dijkstra on the covariance trace; the path found is then composed with the current poses.
+  struct Reached {
+    double distance;
+    std::int64_t previous;
+    const Link* via;
+  };
+  std::unordered_map<std::int64_t, Reached> reached;
+  using Entry = std::pair<double, std::int64_t>;
+  std::priority_queue<Entry, std::vector<Entry>, std::greater<>> queue;
+  reached[from] = {0.0, from, nullptr};
+  queue.push({0.0, from});
+  std::size_t settled = 0;
+  bool found = false;
+  while (!queue.empty() && settled < max_nodes_) {
+    const auto [distance, node] = queue.top();
+    queue.pop();
+    if (distance > reached[node].distance) continue;
+    if (node == to) {
+      found = true;
+      break;
+    }
+    ++settled;
+    const auto it = links_.find(node);
+    if (it == links_.end()) continue;
+    for (const Link& link : it->second) {
+      const double d = distance + link.weight;
+      const auto r = reached.find(link.to);
+      if (r == reached.end() || d < r->second.distance) {
+        reached[link.to] = {d, node, &link};
+        queue.push({d, link.to});
+      }
+    }
+  }
+  if (!found) return std::nullopt;
+  std::vector<std::pair<std::int64_t, const Link*>> steps;  // (node the step starts at, link)
+  for (std::int64_t node = to; node != from; node = reached[node].previous) {
+    steps.emplace_back(reached[node].previous, reached[node].via);
+  }
+  std::reverse(steps.begin(), steps.end());
+  UncertainPose path;
+  for (const auto& [start, link] : steps) {
+    UncertainPose step;
+    step.T = graph_.node(start).T_world_node().inverse() * graph_.node(link->to).T_world_node();
+    step.covariance = link->covariance;
+    path = Compose(path, step);
+  }
+  return path;
+}
+
+namespace {
+
+/// Tomita-Seki style branch and bound: candidates ordered by a greedy colouring, whose colour
+/// number bounds the clique any prefix can still give.
+class CliqueSearch {
+ public:
+  explicit CliqueSearch(const std::vector<std::vector<bool>>& adjacent) : adjacent_(adjacent) {}
+
+  std::vector<int> Run() {
+    std::vector<int> all(adjacent_.size());
+    for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<int>(i);
+    std::vector<int> current;
+    Expand(current, all);
+    std::sort(best_.begin(), best_.end());
+    return best_;
+  }
+
+ private:
+  void Colour(const std::vector<int>& candidates, std::vector<int>* order,
+              std::vector<int>* bounds) const {
+    std::vector<std::vector<int>> classes;
+    for (int v : candidates) {
+      std::size_t k = 0;
+      for (; k < classes.size(); ++k) {
+        const bool free = std::none_of(classes[k].begin(), classes[k].end(),
+                                       [&](int u) { return adjacent_[v][u]; });
+        if (free) break;
+      }
+      if (k == classes.size()) classes.emplace_back();
+      classes[k].push_back(v);
+    }
+    for (std::size_t k = 0; k < classes.size(); ++k) {
+      for (int v : classes[k]) {
+        order->push_back(v);
+        bounds->push_back(static_cast<int>(k) + 1);
+      }
+    }
+  }
+
+  void Expand(std::vector<int>& current, const std::vector<int>& candidates) {
+    std::vector<int> order, bounds;
+    Colour(candidates, &order, &bounds);
+    for (int k = static_cast<int>(order.size()) - 1; k >= 0; --k) {
+      if (current.size() + static_cast<std::size_t>(bounds[k]) <= best_.size()) return;
+      const int v = order[k];
+      current.push_back(v);
+      std::vector<int> next;
+      for (int i = 0; i < k; ++i) {
+        if (adjacent_[v][order[i]]) next.push_back(order[i]);
+      }
+      if (next.empty()) {
+        if (current.size() > best_.size()) best_ = current;
+      } else {
+        Expand(current, next);
+      }
+      current.pop_back();
+    }
+  }
+
+  const std::vector<std::vector<bool>>& adjacent_;
+  std::vector<int> best_;
+};
+
+}  // namespace
+
+std::vector<int> MaximumClique(const std::vector<std::vector<bool>>& adjacent) {
+  return CliqueSearch(adjacent).Run();
+}
+
+}  // namespace planeslam::mapping

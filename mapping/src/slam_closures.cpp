@@ -1,0 +1,327 @@
+// Loop closures as hypotheses (SlamSystem): verification by plane registration, the trajectory
+// and pairwise (PCM) consistency tests, acceptance of the largest consistent set, optimisation
+// (window or whole graph) and retraction of the robust kernel's outliers; and the test hook that
+// injects false closures.
+#include <algorithm>
+#include <random>
+#include <sstream>
+
+#include "planeslam/mapping/slam_system.hpp"
+#include "slam_internal.hpp"
+
+namespace planeslam::mapping {
+
+using namespace slam_internal;  // NOLINT: the helpers shared with slam_system.cpp
+
+namespace {
+
+constexpr std::uint64_t kInjectionSeed = 0x5eed'c105'0001ULL;
+
+/// Uniform in [0, 1) from 53 random bits (independent of the standard library's distributions).
+double Uniform(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
+
+Eigen::Vector3d RandomDirection(std::mt19937_64& rng) {
+  const double z = 2.0 * Uniform(rng) - 1.0;
+  const double phi = 2.0 * M_PI * Uniform(rng);
+  const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
+  return {r * std::cos(phi), r * std::sin(phi), z};
+}
+
+std::string Format(const char* what, double value) {
+  std::ostringstream os;
+  os.precision(3);
+  os << what << value;
+  return os.str();
+}
+
+}  // namespace
+
+const char* ClosureStatusName(ClosureStatus status) {
+  switch (status) {
+    case ClosureStatus::kPending:
+      return "pending";
+    case ClosureStatus::kAccepted:
+      return "accepted";
+    case ClosureStatus::kRejected:
+      return "rejected";
+    case ClosureStatus::kRetracted:
+      return "retracted";
+  }
+  return "unknown";
+}
+
+void SlamSystem::PlanRun(std::size_t frames) {
+  injection_frames_.clear();
+  next_injection_ = 0;
+  if (config_.inject_false_closures <= 0 || frames == 0) return;
+  std::mt19937_64 rng(kInjectionSeed);
+  for (int k = 0; k < config_.inject_false_closures; ++k) {
+    injection_frames_.push_back(static_cast<std::size_t>(Uniform(rng) * frames));
+  }
+  std::sort(injection_frames_.begin(), injection_frames_.end());
+}
+
+void SlamSystem::SearchLoopClosures(const Keyframe& current, SlamFrameResult* result) {
+  const Pose T_world_current = KeyframePose(current.id);
+  struct Candidate {
+    double distance;
+    std::size_t index;
+  };
+  std::vector<Candidate> candidates;
+  for (std::size_t i = 0; i < keyframes_.size(); ++i) {
+    if (keyframes_[i].id > current.id - config_.loop_min_keyframe_gap) break;
+    const Pose T_world_old = KeyframePose(keyframes_[i].id);
+    const double distance = (T_world_old.translation() - T_world_current.translation()).norm();
+    const double angle = RotationAngle(T_world_old.inverse() * T_world_current);
+    if (distance < config_.loop_search_radius && angle < config_.loop_max_angle_deg * kDegToRad) {
+      candidates.push_back({distance, i});
+    }
+  }
+  std::sort(candidates.begin(), candidates.end(), [](const Candidate& a, const Candidate& b) {
+    return a.distance < b.distance || (a.distance == b.distance && a.index < b.index);
+  });
+  if (static_cast<int>(candidates.size()) > config_.loop_max_candidates) {
+    candidates.resize(config_.loop_max_candidates);
+  }
+
+  for (const Candidate& candidate : candidates) {
+    const Keyframe& old = keyframes_[candidate.index];
+    ++stats_.loop_candidates;
+    registration::MotionPrior prior;
+    prior.T_prev_curr = KeyframePose(old.id).inverse() * T_world_current;
+    prior.covariance =
+        DiagonalCovariance(config_.loop_prior_translation_sigma, config_.loop_prior_rotation_sigma);
+    const registration::AssociationResult association = registration::AssociatePlanes(
+        old.planes, current.planes, prior, association_config_, registration_config_);
+    const registration::RegistrationResult& reg = association.registration;
+    // Only a closure the planes fully determine may correct the trajectory: a degenerate one
+    // would carry the (drifted) prior into the graph as if it were a measurement.
+    if (!reg.converged || reg.degenerate) {
+      ++stats_.loop_refused_degenerate;
+      continue;
+    }
+    if (static_cast<int>(reg.inliers.size()) < config_.loop_min_matches) {
+      ++stats_.loop_refused_matches;
+      continue;
+    }
+    if (!(reg.residual_rms < config_.loop_max_residual)) {
+      ++stats_.loop_refused_residual;
+      continue;
+    }
+    LoopClosureRecord record;
+    record.from_keyframe = old.id;
+    record.to_keyframe = current.id;
+    record.from_frame = old.frame;
+    record.to_frame = current.frame;
+    record.T_from_to = reg.T_prev_curr;
+    record.covariance = reg.covariance;
+    ProposeClosure(std::move(record), result);
+  }
+}
+
+void SlamSystem::InjectFalseClosures(const Keyframe& current, SlamFrameResult* result) {
+  // Each planned closure links this keyframe to a random older one (not its predecessor) with
+  // the estimate's relative pose off by 0.1-1 m and 2-20 deg: plausible for a registration, wrong
+  // for the world. Its covariance is a verified closure's (the last one, else 1 cm / 0.3 deg).
+  std::mt19937_64 rng(kInjectionSeed + static_cast<std::uint64_t>(current.id));
+  while (current.id >= 2 && next_injection_ < injection_frames_.size() &&
+         injection_frames_[next_injection_] <= current.frame) {
+    ++next_injection_;
+    const auto old_id =
+        static_cast<std::int64_t>(Uniform(rng) * static_cast<double>(current.id - 1));
+    Vector6d error;
+    error.head<3>() = (0.1 + 0.9 * Uniform(rng)) * RandomDirection(rng);
+    error.tail<3>() = (2.0 + 18.0 * Uniform(rng)) * kDegToRad * RandomDirection(rng);
+    LoopClosureRecord record;
+    record.from_keyframe = old_id;
+    record.to_keyframe = current.id;
+    record.from_frame = keyframes_[static_cast<std::size_t>(old_id)].frame;
+    record.to_frame = current.frame;
+    record.T_from_to =
+        registration::BoxPlus(KeyframePose(old_id).inverse() * KeyframePose(current.id), error);
+    const auto verified = std::find_if(closures_.rbegin(), closures_.rend(),
+                                       [](const LoopClosureRecord& r) { return !r.injected; });
+    record.covariance =
+        verified != closures_.rend() ? verified->covariance : DiagonalCovariance(0.01, 0.005);
+    record.injected = true;
+    ++stats_.closures_injected;
+    ProposeClosure(std::move(record), result);
+  }
+}
+
+void SlamSystem::ProposeClosure(LoopClosureRecord record, SlamFrameResult* result) {
+  // The estimate's relative pose with the uncertainty of the best chain of edges between the two
+  // keyframes; without a short chain, the drift the loop search assumes.
+  const Pose T_estimate =
+      KeyframePose(record.from_keyframe).inverse() * KeyframePose(record.to_keyframe);
+  UncertainPose estimate{T_estimate, DiagonalCovariance(config_.loop_prior_translation_sigma,
+                                                        config_.loop_prior_rotation_sigma)};
+  if (const auto path = paths_->Relative(record.from_keyframe, record.to_keyframe)) {
+    estimate.covariance = path->covariance;
+  }
+  const UncertainPose deviation =
+      Compose(Invert(estimate), UncertainPose{record.T_from_to, record.covariance});
+  record.chi2_trajectory = IdentityChi2(deviation);
+  record.decided_frame = record.to_frame;
+  if (!(record.chi2_trajectory <= config_.loop_consistency_chi2)) {
+    record.status = ClosureStatus::kRejected;
+    record.reason = Format("inconsistent with the trajectory: chi2 ", record.chi2_trajectory);
+    ++stats_.closures_rejected;
+    ++result->closures_rejected;
+  } else {
+    pending_.push_back(closures_.size());
+  }
+  closures_.push_back(std::move(record));
+}
+
+bool SlamSystem::PairConsistent(std::size_t a, std::size_t b) {
+  if (a > b) std::swap(a, b);
+  const auto cached = pair_consistent_.find({a, b});
+  if (cached != pair_consistent_.end()) return cached->second;
+  const LoopClosureRecord& A = closures_[a];
+  const LoopClosureRecord& B = closures_[b];
+  const auto relative = [&](std::int64_t from, std::int64_t to) {
+    if (auto path = paths_->Relative(from, to)) return *path;
+    return UncertainPose{KeyframePose(from).inverse() * KeyframePose(to),
+                         DiagonalCovariance(config_.loop_prior_translation_sigma,
+                                            config_.loop_prior_rotation_sigma)};
+  };
+  // Cycle from A's old keyframe: A's closure, the chain between the new keyframes, B's closure
+  // backwards, the chain between the old keyframes backwards.
+  const UncertainPose cycle = Compose(Compose(Compose(UncertainPose{A.T_from_to, A.covariance},
+                                                      relative(A.to_keyframe, B.to_keyframe)),
+                                              Invert(UncertainPose{B.T_from_to, B.covariance})),
+                                      Invert(relative(A.from_keyframe, B.from_keyframe)));
+  const bool consistent = IdentityChi2(cycle) <= config_.loop_consistency_chi2;
+  pair_consistent_[{a, b}] = consistent;
+  return consistent;
+}
+
+int SlamSystem::DecideClosures(std::int64_t current_id, SlamFrameResult* result) {
+  if (pending_.empty()) return 0;
+  const std::int64_t window_start = current_id - config_.loop_window_keyframes;
+  // The window: the pending hypotheses and the closures accepted within it (support).
+  std::vector<std::size_t> window;
+  for (const auto& [pair, index] : accepted_edges_) {
+    if (closures_[index].to_keyframe >= window_start) window.push_back(index);
+  }
+  std::sort(window.begin(), window.end());
+  window.insert(window.end(), pending_.begin(), pending_.end());
+  const std::size_t n = window.size();
+  std::vector<std::vector<bool>> adjacent(n, std::vector<bool>(n, false));
+  for (std::size_t i = 0; i < n; ++i) {
+    for (std::size_t j = i + 1; j < n; ++j) {
+      adjacent[i][j] = adjacent[j][i] = PairConsistent(window[i], window[j]);
+    }
+  }
+  const std::vector<int> clique = MaximumClique(adjacent);
+  const int support = static_cast<int>(clique.size());
+  std::vector<bool> in_clique(n, false);
+  for (int k : clique) in_clique[static_cast<std::size_t>(k)] = true;
+
+  int accepted = 0;
+  std::vector<std::size_t> still_pending;
+  const std::size_t frame =
+      keyframes_[static_cast<std::size_t>(std::min<std::int64_t>(
+                     current_id, static_cast<std::int64_t>(keyframes_.size()) - 1))]
+          .frame;
+  for (std::size_t k = 0; k < n; ++k) {
+    const std::size_t index = window[k];
+    LoopClosureRecord& record = closures_[index];
+    if (record.status != ClosureStatus::kPending) continue;
+    if (in_clique[k] && support >= config_.loop_min_support) {
+      record.status = ClosureStatus::kAccepted;
+      record.support = support;
+      record.reason = "in the largest consistent set (" + std::to_string(support) + ")";
+      record.decided_frame = frame;
+      graph_.AddEdge(record.from_keyframe, record.to_keyframe, record.T_from_to,
+                     InformationFromCovariance(record.covariance), EdgeKind::kLoopClosure);
+      paths_->AddEdge(graph_.edges().back());
+      accepted_edges_[{record.from_keyframe, record.to_keyframe}] = index;
+      ++accepted;
+    } else if (record.to_keyframe < window_start) {
+      record.status = ClosureStatus::kRejected;
+      record.reason = support >= config_.loop_min_support
+                          ? "outside the largest consistent set (" + std::to_string(support) + ")"
+                          : "no consistent support within the window";
+      record.decided_frame = frame;
+      ++stats_.closures_rejected;
+      ++result->closures_rejected;
+    } else {
+      still_pending.push_back(index);
+    }
+  }
+  pending_ = std::move(still_pending);
+  // Pairs of hypotheses that left the window are not asked again.
+  const std::size_t oldest = window.empty() ? 0 : *std::min_element(window.begin(), window.end());
+  pair_consistent_.erase(pair_consistent_.begin(), pair_consistent_.lower_bound({oldest, 0}));
+  stats_.loop_closures += static_cast<std::size_t>(accepted);
+  return accepted;
+}
+
+void SlamSystem::OptimizeAfterClosures(int accepted, SlamFrameResult* result) {
+  const auto start = std::chrono::steady_clock::now();
+  const std::int64_t current_id = keyframes_.back().id;
+  // The latest keyframes are optimised first (warm start from the current poses); when that
+  // leaves a new closure unsatisfied (residual chi-square above loop_consistency_chi2) the
+  // correction reaches further back and the whole graph is optimised.
+  const bool window = config_.local_window_keyframes > 0 &&
+                      current_id >= 2 * static_cast<std::int64_t>(config_.local_window_keyframes);
+  bool whole = !window;
+  if (window) {
+    const std::int64_t first_free = current_id - config_.local_window_keyframes + 1;
+    Optimize(first_free);
+    for (std::size_t k = closures_.size(); !whole && k-- > 0 && accepted > 0;) {
+      const LoopClosureRecord& record = closures_[k];
+      if (record.status != ClosureStatus::kAccepted || record.to_keyframe != current_id) continue;
+      --accepted;
+      const Vector6d e =
+          registration::BoxMinus(record.T_from_to, KeyframePose(record.from_keyframe).inverse() *
+                                                       KeyframePose(current_id));
+      whole =
+          e.dot(InformationFromCovariance(record.covariance) * e) > config_.loop_consistency_chi2;
+    }
+  }
+  if (whole) Optimize();
+  int retracted = RetractOutliers(0, keyframes_.back().frame);
+  // Without its outliers the graph is optimised again, whole (they may have bent all of it).
+  for (int round = 0; retracted > 0 && round < 3; ++round) {
+    result->closures_retracted += retracted;
+    Optimize();
+    retracted = RetractOutliers(0, keyframes_.back().frame);
+  }
+  stats_.time_optimize_ms += ElapsedMs(start);
+}
+
+int SlamSystem::RetractOutliers(std::int64_t first_checked, std::size_t frame) {
+  int retracted = 0;
+  auto& edges = graph_.edges();
+  for (std::size_t k = 0; k < edges.size();) {
+    const PoseGraphEdge& edge = edges[k];
+    const auto found = accepted_edges_.find({edge.from, edge.to});
+    if (edge.kind != EdgeKind::kLoopClosure || edge.to < first_checked ||
+        found == accepted_edges_.end()) {
+      ++k;
+      continue;
+    }
+    LoopClosureRecord& record = closures_[found->second];
+    record.chi2_residual = EvaluateEdgeResidual(edge, ToAmbient(KeyframePose(edge.from)),
+                                                ToAmbient(KeyframePose(edge.to)))
+                               .residual.squaredNorm();
+    if (record.chi2_residual <= config_.loop_consistency_chi2) {
+      ++k;
+      continue;
+    }
+    record.status = ClosureStatus::kRetracted;
+    record.reason = Format("outlier of the optimisation: residual chi2 ", record.chi2_residual);
+    record.decided_frame = frame;
+    paths_->RemoveEdge(edge.from, edge.to);
+    accepted_edges_.erase(found);
+    edges.erase(edges.begin() + static_cast<std::ptrdiff_t>(k));
+    ++retracted;
+    ++stats_.closures_retracted;
+  }
+  return retracted;
+}
+
+}  // namespace planeslam::mapping

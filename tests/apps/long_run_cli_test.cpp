@@ -1,0 +1,80 @@
+// Loop closures as hypotheses, end to end: wrong closures injected into the built-in room are
+// rejected or retracted and leave the trajectory as it was; on the aliasing ring (eight identical
+// segments) no false closure is accepted; and a two-lap room stays in one piece. Shortened
+// runs; `planeslam bench long-run` runs the full ones.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "cli_support.hpp"
+#include "planeslam/datasets/synthetic_sequence.hpp"
+#include "planeslam/datasets/trajectory_eval.hpp"
+#include "planeslam/datasets/trajectory_io.hpp"
+#include "test_support.hpp"
+
+namespace planeslam::test {
+namespace {
+
+namespace fs = std::filesystem;
+
+nlohmann::json RunAndSummarise(const std::string& args, const fs::path& dir) {
+  const fs::path out = dir / "out";
+  const CliResult r =
+      RunCli("run -q --set octomap.enabled=false " + args + " --out " + out.string(), dir);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  return nlohmann::json::parse(Slurp(out / "summary.json"));
+}
+
+std::size_t CountLines(const std::string& text) {
+  std::size_t n = 0;
+  for (char c : text) n += c == '\n';
+  return n;
+}
+
+TEST(LongRunCli, InjectedFalseClosuresAreNotKept) {
+  const fs::path dir = ScratchDir();
+  const nlohmann::json summary = RunAndSummarise("--set slam.inject_false_closures=50", dir);
+  const nlohmann::json& closures = summary["closures"];
+  EXPECT_EQ(closures["injected"].get<int>(), 50);
+  EXPECT_EQ(closures["injected_accepted"].get<int>(), 0);
+  EXPECT_EQ(closures["ground_truth"]["false_accepted"].get<int>(), 0);
+  EXPECT_GT(closures["accepted"].get<int>(), 20);  // the room's true closures still close it
+  // Clean run: 0.85 cm; the acceptance allows 0.2 cm more.
+  EXPECT_LT(summary["metrics"]["ate"]["rmse"].get<double>(), 0.0105);
+  // One closures.csv row per hypothesis, each with a status and a reason.
+  EXPECT_EQ(CountLines(Slurp(dir / "out" / "closures.csv")),
+            closures["hypotheses"].get<std::size_t>() + 1);
+}
+
+TEST(LongRunCli, AliasingRingAcceptsNoFalseClosure) {
+  const fs::path dir = ScratchDir();
+  const nlohmann::json summary = RunAndSummarise("--scene ring --set simulation.laps=1.15", dir);
+  const nlohmann::json& closures = summary["closures"];
+  EXPECT_GT(closures["accepted"].get<int>(), 0);
+  EXPECT_EQ(closures["ground_truth"]["false_accepted"].get<int>(), 0);
+}
+
+TEST(LongRunCli, TwoLapsStayInOnePiece) {
+  const fs::path dir = ScratchDir();
+  const nlohmann::json summary = RunAndSummarise("--set simulation.laps=2", dir);
+  EXPECT_EQ(summary["closures"]["ground_truth"]["false_accepted"].get<int>(), 0);
+  EXPECT_GT(summary["back_end"]["local_optimizations"].get<int>(), 0);
+  // Aligned on its first 300 frames, the whole estimate stays on the truth: a map split in two
+  // would show as a jump of tens of centimetres.
+  datasets::SyntheticConfig room = datasets::SyntheticConfig::ForScene(datasets::SceneKind::kRoom);
+  room.trajectory.laps = 2.0;
+  const datasets::Trajectory truth = datasets::SyntheticSequence(room).GroundTruthTrajectory();
+  const datasets::Trajectory estimate =
+      datasets::ReadTumTrajectory((dir / "out" / "trajectory_tum.txt").string());
+  datasets::ApeOptions options;
+  options.alignment.align = true;
+  options.alignment.n_to_align = 300;
+  const datasets::ApeResult ape = datasets::EvaluateApe(truth, estimate, options);
+  ASSERT_TRUE(ape.ok) << ape.message;
+  EXPECT_LT(ape.stats.max, 0.05);
+}
+
+}  // namespace
+}  // namespace planeslam::test
