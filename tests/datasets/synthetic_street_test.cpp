@@ -191,7 +191,7 @@ TEST(StreetKittiLayout, ReadsBackBitForBit) {
   sensor.lidar_column_shift = 1;
   sensor.min_depth = 0.0;
   sensor.max_depth = 0.0;
-  for (const fs::path folder : {dir / "a", dir / "a" / "velodyne"}) {
+  for (const fs::path& folder : {dir / "a", dir / "a" / "velodyne"}) {
     const auto read = OpenSequence(folder.string(), sensor);
     ASSERT_EQ(read->Size(), 3u);
     const Pose first_inv = seq.GroundTruth(0)->inverse();
