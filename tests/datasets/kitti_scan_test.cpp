@@ -245,7 +245,7 @@ TEST(KittiScan, KittiOdometryTreeFindsPosesTimesAndCalibration) {
   for (int n = 0; n < 3; ++n) poses += "1 0 0 0 0 1 0 0 0 0 1 " + std::to_string(2 * n) + "\n";
   { std::ofstream(root / "poses" / "07.txt") << poses; }
   EXPECT_EQ(DetectLayout(seq_dir.string()), SequenceLayout::kKittiBin);
-  for (const fs::path folder : {seq_dir, seq_dir / "velodyne"}) {
+  for (const fs::path& folder : {seq_dir, seq_dir / "velodyne"}) {
     const auto seq = OpenSequence(folder.string(), SensorConfig{});
     ASSERT_EQ(seq->Size(), 3u);
     EXPECT_EQ(seq->Name(), "07");

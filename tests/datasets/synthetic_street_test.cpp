@@ -100,7 +100,7 @@ TEST(StreetRoute, LoopLengthSpeedAndScannerHeight) {
   EXPECT_LT(closest, 1.0);
 }
 
-/// Noise-free scans agree with the brute-force intersection on every 13th ray, on a straight and
+/// Noise-free scans agree with the brute-force intersection on every 19th ray, on a straight and
 /// in a turn.
 TEST(RotatingLidar, MatchesBruteForce) {
   SyntheticConfig config = Street(0);
@@ -115,7 +115,7 @@ TEST(RotatingLidar, MatchesBruteForce) {
     const Pose T = *frame.frame.T_world_sensor_gt;
     int compared = 0;
     for (int r = 0; r < lidar.Height(); ++r) {
-      for (int c = r % 13; c < lidar.Width(); c += 13) {
+      for (int c = r % 19; c < lidar.Width(); c += 19) {
         const std::size_t i = static_cast<std::size_t>(r) * lidar.Width() + c;
         const RayHit hit =
             IntersectScene(seq.scene(), T.translation(), T.linear() * lidar.RayDirection(r, c));
@@ -128,7 +128,7 @@ TEST(RotatingLidar, MatchesBruteForce) {
         ++compared;
       }
     }
-    EXPECT_GT(compared, 5000);
+    EXPECT_GT(compared, 3500);
   }
 }
 
@@ -145,8 +145,8 @@ TEST(RotatingLidar, MotionDistortionCastsEachFiringFromItsPose) {
   const SyntheticFrame frame = seq.Generate(index);
   int compared = 0;
   double largest_shift = 0.0;
-  for (int r = 0; r < lidar.Height(); r += 3) {
-    for (int c = 0; c < lidar.Width(); c += 7) {
+  for (int r = 0; r < lidar.Height(); r += 4) {
+    for (int c = 0; c < lidar.Width(); c += 11) {
       const double dt = lidar.ColumnTimeOffset(c);
       ASSERT_LE(std::abs(dt), 0.05 + 1e-12);
       const Pose Tc = TrajectoryBodyPose(config.trajectory, seq.Timestamp(index) + dt);
@@ -162,7 +162,7 @@ TEST(RotatingLidar, MotionDistortionCastsEachFiringFromItsPose) {
       ++compared;
     }
   }
-  EXPECT_GT(compared, 2000);
+  EXPECT_GT(compared, 1000);
   EXPECT_GT(largest_shift, 0.2);  // half a scan at about 10 m/s
   // Column times: -pi/2 azimuth (right) fires a quarter turn after the reference (ahead).
   const int right = static_cast<int>(std::lround(0.75 * lidar.Width() - 0.25));
@@ -191,7 +191,7 @@ TEST(StreetKittiLayout, ReadsBackBitForBit) {
   sensor.lidar_column_shift = 1;
   sensor.min_depth = 0.0;
   sensor.max_depth = 0.0;
-  for (const fs::path folder : {dir / "a", dir / "a" / "velodyne"}) {
+  for (const fs::path& folder : {dir / "a", dir / "a" / "velodyne"}) {
     const auto read = OpenSequence(folder.string(), sensor);
     ASSERT_EQ(read->Size(), 3u);
     const Pose first_inv = seq.GroundTruth(0)->inverse();
@@ -246,7 +246,7 @@ TEST(StreetKittiLayout, ReadsBackBitForBit) {
   }
 }
 
-/// A randomized family: four seeds (other buildings, cars and trees), six scans each at random
+/// A randomized family: three seeds (other buildings, cars and trees), six scans each at random
 /// places along the route (turns and crossings included). Every scan listed in KITTI's point
 /// order projects back onto exactly its range image: all 64 lasers recovered from the order,
 /// no collision. Failure budget: none.
@@ -257,7 +257,7 @@ TEST(StreetKittiLayout, EveryLaserRecoveredAcrossSeedsAndPlaces) {
   sensor.lidar_row_mode = "scan_order";
   sensor.lidar_column_shift = 1;
   std::mt19937_64 rng(33);
-  for (std::uint64_t seed = 1; seed <= 4; ++seed) {
+  for (std::uint64_t seed = 1; seed <= 3; ++seed) {
     SyntheticConfig config = Street(0);
     config.seed = seed;
     const SyntheticSequence seq(config);
