@@ -121,8 +121,10 @@ class RunCommand : public Command {
                    "omitted: the synthetic scene of the 'simulation' config section");
     sub.add_option("-o,--out", out_dir_,
                    "output folder (default: output.directory, planeslam_out)");
-    sub.add_option("--scene", scene_, "synthetic scene when no SEQUENCE: room, corridor, rubble");
+    sub.add_option("--scene", scene_,
+                   "synthetic scene when no SEQUENCE: room, corridor, rubble, street");
     sub.add_option("--method", method_, "plane detector (default: detection.method)");
+    sub.add_flag("--no-report", no_report_, "do not write report.html (as report.enabled: false)");
     AddSensorOption(sub, sensor_);
     AddConfigOptions(sub, options_);
     sub.footer(
@@ -130,6 +132,8 @@ class RunCommand : public Command {
         "         octomap.bt (octomap.enabled) config.yaml summary.json frames.csv, and with "
         "ground truth metrics.json + "
         "plots/*.svg\n"
+        "         + ground_truth_tum.txt; report.html + keyframe_cloud.pcd (report.enabled, "
+        "--no-report: off)\n"
         "Ctrl-C stops after the current frame and writes the outputs of the frames done.\n"
         "A frame that cannot be read (corrupt, truncated or missing file) is left out with a "
         "warning\n"
@@ -148,6 +152,7 @@ class RunCommand : public Command {
   int Run() override {
     Config config = LoadConfigWithProfile(options_, sensor_, sequence_, "run");
     if (MaybePrintConfig(options_, config)) return 0;
+    if (no_report_) config.Get<ReportConfig>("report").enabled = false;
     ApplyInputLimits(config);
     const RunConfig& run = config.Get<RunConfig>("run");
     const std::string method =
@@ -172,6 +177,7 @@ class RunCommand : public Command {
     session.Finish();
     const std::string ate_line = session.Write(out_dir);
     session.PrintReport(ate_line, out_dir);
+    session.WriteReport(out_dir);
     return session.ExitCode();
   }
 
@@ -181,6 +187,7 @@ class RunCommand : public Command {
   std::string scene_;
   std::string method_;
   std::string sensor_;
+  bool no_report_ = false;
   ConfigOptions options_;
 };
 

@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <iostream>
 #include <nlohmann/json.hpp>
 
 #include "cli_common.hpp"
+#include "config_sections_app.hpp"
 #include "config_sections_mapping.hpp"
 #include "detector_factory.hpp"
 #include "exit_codes.hpp"
@@ -14,6 +16,7 @@
 #include "planeslam/datasets/trajectory_io.hpp"
 #include "planeslam/mapping/g2o_io.hpp"
 #include "planeslam/mapping/map_writers.hpp"
+#include "report.hpp"
 #include "trajectory_plots.hpp"
 
 namespace planeslam::app {
@@ -126,6 +129,9 @@ RunSession::RunSession(Config config, const std::string& method, std::string inp
   slam_ = MakeSlamSystem(config_);
   const auto& octomap = config_.Get<mapping::OccupancyMapConfig>("octomap");
   want_octomap_ = octomap.enabled && mapping::OccupancyMapBuilder::available();
+  const auto& report = config_.Get<ReportConfig>("report");
+  keep_keyframe_clouds_ = want_octomap_ || (report.enabled && report.cloud_points > 0);
+  keyframe_voxel_ = want_octomap_ ? octomap.downsample_voxel : 0.05;
   frame_log_ << "index,timestamp,keyframe,planes,matches,tracked,degenerate,point_to_plane,"
                 "loop_closures,refused,status\n";
   wall_start_ = Clock::now();
@@ -149,11 +155,9 @@ mapping::SlamFrameResult RunSession::Track(std::size_t index, ds::Frame& frame) 
       slam_->ProcessFrame(frame.timestamp, frame.cloud, segmentation);
   if (frame.T_world_sensor_gt) ground_truth_.Add(frame.timestamp, *frame.T_world_sensor_gt);
   LogFrame(index, frame.timestamp, result, frame_log_);
-  if (want_octomap_ && result.keyframe) {
-    const auto& octomap = config_.Get<mapping::OccupancyMapConfig>("octomap");
-    keyframe_clouds_.emplace_back(
-        static_cast<std::int64_t>(slam_->stats().keyframes - 1),
-        mapping::VoxelDownsample(frame.cloud.points, octomap.downsample_voxel));
+  if (keep_keyframe_clouds_ && result.keyframe) {
+    keyframe_clouds_.emplace_back(static_cast<std::int64_t>(slam_->stats().keyframes - 1),
+                                  mapping::VoxelDownsample(frame.cloud.points, keyframe_voxel_));
   }
   ++done_;
   return result;
@@ -183,6 +187,9 @@ std::string RunSession::Write(const std::string& out_dir) {
   EnsureDirectory(out_dir);
   const ds::Trajectory estimate = slam_->EstimatedTrajectory();
   WriteMapOutputs(out_dir, *slam_, estimate, config_, frame_log_.str());
+  if (!ground_truth_.empty()) {
+    ds::WriteTumTrajectory(out_dir + "/ground_truth_tum.txt", ground_truth_);
+  }
   if (want_octomap_) {
     WriteOctomap(out_dir, config_.Get<mapping::OccupancyMapConfig>("octomap"), *slam_,
                  keyframe_clouds_);
@@ -268,6 +275,27 @@ void RunSession::PrintReport(const std::string& ate_line, const std::string& out
       time_load_ / done, time_detect_ / done, stats.time_tracking_ms / done,
       stats.time_map_ms / done, stats.time_loop_ms / done, stats.time_optimize_ms + finish_ms_);
   std::printf("outputs in %s/\n", out_dir.c_str());
+}
+
+void RunSession::WriteReport(const std::string& out_dir) const {
+  const auto& report = config_.Get<ReportConfig>("report");
+  if (!report.enabled) return;
+  if (!ReportAvailable()) {
+    std::cerr << "planeslam run: " << ReportUnavailableReason() << "\n";
+    return;
+  }
+  const auto t = Clock::now();
+  try {
+    const auto max_points = static_cast<std::size_t>(report.cloud_points);
+    if (max_points > 0 && !keyframe_clouds_.empty()) {
+      WriteKeyframeCloud(out_dir + "/keyframe_cloud.pcd", keyframe_clouds_, slam_->KeyframePoses(),
+                         max_points);
+    }
+    WriteRunReport(out_dir, max_points);
+    std::printf("report.html written in %.0f ms\n", MsSince(t));
+  } catch (const std::exception& e) {
+    std::cerr << "planeslam run: warning: report.html not written: " << e.what() << "\n";
+  }
 }
 
 int RunSession::ExitCode() const {

@@ -75,6 +75,9 @@ class RunSession {
   std::string Write(const std::string& out_dir);
   /// The report `planeslam run` prints to stdout.
   void PrintReport(const std::string& ate_line, const std::string& out_dir) const;
+  /// keyframe_cloud.pcd and report.html (report.enabled) from the files Write wrote, with the
+  /// time taken on stdout; a failure there leaves the other outputs standing and is a warning.
+  void WriteReport(const std::string& out_dir) const;
   /// kExitSuccess, or the exit code for skipped frames, a stop at a bad frame or an interrupt.
   int ExitCode() const;
 
@@ -84,14 +87,16 @@ class RunSession {
   std::unique_ptr<detection::PlaneDetector> detector_;
   std::unique_ptr<mapping::SlamSystem> slam_;
   bool want_octomap_ = false;
+  bool keep_keyframe_clouds_ = false;  ///< for the OctoMap or the report's point cloud
+  double keyframe_voxel_ = 0.0;        ///< [m] their voxel grid
 
   std::size_t done_ = 0;
   bool interrupted_ = false;
   bool stopped_at_bad_frame_ = false;
   std::vector<BadFrame> bad_frames_;
   double time_load_ = 0.0, time_detect_ = 0.0;  ///< [ms] summed over the frames
-  /// Thinned clouds of the keyframes by keyframe id, inserted into the OctoMap at the end with
-  /// the optimised keyframe poses.
+  /// Thinned clouds of the keyframes by keyframe id, inserted into the OctoMap and the report's
+  /// cloud at the end with the optimised keyframe poses.
   std::vector<std::pair<std::int64_t, std::vector<Eigen::Vector3f>>> keyframe_clouds_;
   datasets::Trajectory ground_truth_;
   std::ostringstream frame_log_;  ///< frames.csv: what the tracker did with each frame

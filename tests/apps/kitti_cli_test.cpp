@@ -1,5 +1,5 @@
 // KITTI-layout sequences through the command line: a simulated street runs without -c (the kitti
-// profile is recognised), a bad scan inside a run is reported and skipped, `eval kitti` prints
+// profile is recognised, giving the same outputs as with its config file), a bad scan inside a run is reported and skipped, `eval kitti` prints
 // the devkit's segment errors, and `run` / `bench odometry` report them for KITTI ground truth.
 #include <gtest/gtest.h>
 
@@ -38,6 +38,16 @@ TEST(KittiCli, SimulatedStreetRunsWithoutConfigAndSkipsABadScan) {
   ASSERT_EQ(run.exit_code, app::kExitSuccess) << run.err;
   EXPECT_TRUE(Contains(run.err, "--sensor kitti")) << run.err;
   EXPECT_EQ(datasets::ReadTumTrajectory((dir / "run" / "trajectory_tum.txt").string()).size(), 5u);
+  // The recognised profile is the configs a user would give: the same trajectory and map.
+  const CliResult with_configs =
+      RunCli("run -q " + street.string() + " --sensor none -c " + PLANESLAM_SOURCE_DIR +
+                 "/config/kitti_hdl64.yaml --out " + (dir / "run_c").string() +
+                 " --set octomap.enabled=false",
+             dir);
+  ASSERT_EQ(with_configs.exit_code, app::kExitSuccess) << with_configs.err;
+  for (const char* f : {"trajectory_tum.txt", "plane_map.json"}) {
+    EXPECT_EQ(Slurp(dir / "run" / f), Slurp(dir / "run_c" / f)) << f;
+  }
 
   // Scan 2 cut in the middle of a point: left out, the run completes with exit code 5.
   const fs::path bad = street / "velodyne" / "000002.bin";
@@ -98,12 +108,12 @@ TEST(KittiCli, EvalKittiPrintsDevkitSegmentErrors) {
   EXPECT_TRUE(Contains(t.out, expected)) << t.out;
 }
 
-/// A street driven with one scan every 10 m (1 Hz) over 120 m: run and bench odometry print and
+/// A street driven with one scan every 10 m (1 Hz) over 110 m: run and bench odometry print and
 /// store the segment errors of the 100 m segments.
 TEST(KittiCli, RunAndBenchReportSegmentErrors) {
   const fs::path dir = ScratchDir();
   const fs::path street = dir / "street";
-  const CliResult sim = RunCli("simulate street -q --frames 13 --set simulation.rate=1 --out " +
+  const CliResult sim = RunCli("simulate street -q --frames 12 --set simulation.rate=1 --out " +
                                    street.string(),
                                dir);
   ASSERT_EQ(sim.exit_code, 0) << sim.err;

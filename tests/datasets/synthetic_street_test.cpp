@@ -5,9 +5,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <random>
 #include <sstream>
 
 #include "planeslam/datasets/kitti_scan.hpp"
@@ -98,7 +100,7 @@ TEST(StreetRoute, LoopLengthSpeedAndScannerHeight) {
   EXPECT_LT(closest, 1.0);
 }
 
-/// Noise-free scans agree with the brute-force intersection on every 9th ray, on a straight and
+/// Noise-free scans agree with the brute-force intersection on every 13th ray, on a straight and
 /// in a turn.
 TEST(RotatingLidar, MatchesBruteForce) {
   SyntheticConfig config = Street(0);
@@ -113,7 +115,7 @@ TEST(RotatingLidar, MatchesBruteForce) {
     const Pose T = *frame.frame.T_world_sensor_gt;
     int compared = 0;
     for (int r = 0; r < lidar.Height(); ++r) {
-      for (int c = r % 9; c < lidar.Width(); c += 9) {
+      for (int c = r % 13; c < lidar.Width(); c += 13) {
         const std::size_t i = static_cast<std::size_t>(r) * lidar.Width() + c;
         const RayHit hit =
             IntersectScene(seq.scene(), T.translation(), T.linear() * lidar.RayDirection(r, c));
@@ -126,7 +128,7 @@ TEST(RotatingLidar, MatchesBruteForce) {
         ++compared;
       }
     }
-    EXPECT_GT(compared, 8000);
+    EXPECT_GT(compared, 5000);
   }
 }
 
@@ -241,6 +243,46 @@ TEST(StreetKittiLayout, ReadsBackBitForBit) {
   WriteSyntheticSequence(seq, (dir / "b").string());
   for (const char* f : {"velodyne/000001.bin", "labels/000001.label", "poses.txt", "planes.json"}) {
     EXPECT_EQ(Slurp(dir / "a" / f), Slurp(dir / "b" / f)) << f;
+  }
+}
+
+/// A randomized family: four seeds (other buildings, cars and trees), six scans each at random
+/// places along the route (turns and crossings included). Every scan listed in KITTI's point
+/// order projects back onto exactly its range image: all 64 lasers recovered from the order,
+/// no collision. Failure budget: none.
+TEST(StreetKittiLayout, EveryLaserRecoveredAcrossSeedsAndPlaces) {
+  SensorConfig sensor;
+  sensor.lidar_rows = 64;
+  sensor.lidar_cols = 2083;
+  sensor.lidar_row_mode = "scan_order";
+  sensor.lidar_column_shift = 1;
+  std::mt19937_64 rng(33);
+  for (std::uint64_t seed = 1; seed <= 4; ++seed) {
+    SyntheticConfig config = Street(0);
+    config.seed = seed;
+    const SyntheticSequence seq(config);
+    const std::vector<int> order = KittiColumnOrder(seq.sensor().Width());
+    for (int k = 0; k < 6; ++k) {
+      const std::size_t index = static_cast<std::size_t>(rng() % seq.Size());
+      const SyntheticFrame frame = seq.Generate(index);
+      const OrganizedCloud& cloud = frame.frame.cloud;
+      std::vector<LidarPoint> scan;
+      for (int r = 0; r < cloud.height; ++r) {
+        for (int c : order) {
+          const Eigen::Vector3f& p = cloud.points[static_cast<std::size_t>(r) * cloud.width + c];
+          if (OrganizedCloud::IsValid(p)) scan.emplace_back(p.x(), p.y(), p.z(), 0.5f);
+        }
+      }
+      RangeProjectionStats stats;
+      const OrganizedCloud back = ProjectToRangeImage(scan, sensor, &stats);
+      ASSERT_TRUE(stats.used_scan_order) << "seed " << seed << " scan " << index;
+      EXPECT_EQ(stats.collisions, 0u);
+      EXPECT_EQ(stats.placed, scan.size());
+      for (std::size_t i = 0; i < cloud.points.size(); ++i) {
+        ASSERT_EQ(back.IsValid(i), cloud.IsValid(i)) << "seed " << seed << " scan " << index;
+        if (cloud.IsValid(i)) ASSERT_EQ(back.points[i], cloud.points[i]);
+      }
+    }
   }
 }
 
