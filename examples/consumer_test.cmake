@@ -1,6 +1,6 @@
-# Installs a planeslam build tree into a prefix under it, builds examples/detect_planes and
-# examples/odometry against that prefix as separate CMake projects, and runs them on the shared
-# data. Run by ctest (tests/CMakeLists.txt) as
+# Installs a planeslam build tree into a prefix under it, builds examples/detect_planes,
+# examples/odometry and examples/slam against that prefix as separate CMake projects, and runs
+# them on the shared data. Run by ctest (tests/CMakeLists.txt) as
 #   cmake -DBUILD_DIR=... -DSOURCE_DIR=... -DDATA_DIR=... -DCXX_COMPILER=... [...] -P this file
 # The examples are built with the build tree's compiler, flags and build type; in a sanitizer
 # build the installed libraries carry -fsanitize in their link interface, so the examples link
@@ -34,7 +34,7 @@ set(_args -DCMAKE_PREFIX_PATH=${_prefix} -DCMAKE_CXX_COMPILER=${CXX_COMPILER}
 if(COMPILER_LAUNCHER)
   list(APPEND _args -DCMAKE_CXX_COMPILER_LAUNCHER=${COMPILER_LAUNCHER})
 endif()
-foreach(_example detect_planes odometry)
+foreach(_example detect_planes odometry slam)
   file(REMOVE_RECURSE ${_work}/${_example})
   run_checked("configuring examples/${_example}" ${CMAKE_COMMAND} -S ${SOURCE_DIR}/examples/${_example}
               -B ${_work}/${_example} ${_args})
@@ -59,4 +59,11 @@ run_checked("odometry" ${_work}/odometry/odometry ${_sequence} 30)
 message("${LAST_OUTPUT}")
 if(NOT LAST_OUTPUT MATCHES "\n# 30 frames, path length 0\\.[0-9]+ m\n$")
   message(FATAL_ERROR "odometry: unexpected output")
+endif()
+
+run_checked("slam" ${_work}/slam/slam ${_sequence} ${_work}/slam_out 30)
+message("${LAST_OUTPUT}")
+if(NOT LAST_OUTPUT MATCHES "^# 30 frames, [1-9][0-9]* keyframes, [1-9][0-9]* map planes, final cost "
+   OR NOT EXISTS ${_work}/slam_out/trajectory_tum.txt OR NOT EXISTS ${_work}/slam_out/plane_map.ply)
+  message(FATAL_ERROR "slam: unexpected output")
 endif()
