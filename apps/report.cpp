@@ -105,6 +105,15 @@ std::vector<Eigen::Vector3f> ThinToCount(std::vector<Eigen::Vector3f> points, do
 void PackPolygons(nlohmann::json* data) {
   std::vector<Eigen::Vector3f> vertices;
   for (auto& plane : (*data)["planes"]) {
+    // The page shows parameters to 4 decimals; shorter numbers keep a large map's page small.
+    for (auto& [key, value] : plane.items()) {
+      if (value.is_number_float()) value = std::round(value.get<double>() * 1e4) / 1e4;
+      if (key != "polygons" && value.is_array()) {
+        for (auto& x : value) {
+          if (x.is_number_float()) x = std::round(x.get<double>() * 1e4) / 1e4;
+        }
+      }
+    }
     nlohmann::json parts = nlohmann::json::array();
     for (const auto& polygon : plane.value("polygons", nlohmann::json::array())) {
       parts.push_back(polygon.size());
@@ -263,12 +272,24 @@ std::size_t WriteKeyframeCloud(
     const Eigen::Isometry3f T = it->second.cast<float>();
     for (const auto& p : points) world.push_back(T * p);
   }
+  // Every k-th point first, so that voxel thinning sorts at most ten times the points it keeps
+  // (hundreds of LiDAR keyframes hold tens of millions).
+  const std::size_t keep = 10 * std::max<std::size_t>(max_points, 1);
+  if (world.size() > keep) {
+    const std::size_t stride = (world.size() + keep - 1) / keep;
+    std::size_t out = 0;
+    for (std::size_t i = 0; i < world.size(); i += stride) world[out++] = world[i];
+    world.resize(out);
+  }
   world = ThinToCount(std::move(world), 0.02, max_points);
   ds::OrganizedCloud cloud(static_cast<int>(world.size()), 1);
   cloud.points = std::move(world);
   ds::WritePcd(path, cloud);
   return cloud.size();
 }
+
+/// The size a run's page keeps below when it can [bytes]: its point cloud is thinned to fit.
+constexpr std::size_t kPageBudget = 4800000;
 
 bool WriteRunReport(const std::string& dir_name, std::size_t max_cloud_points) {
   if (!ReportAvailable()) return false;
@@ -297,6 +318,10 @@ bool WriteRunReport(const std::string& dir_name, std::size_t max_cloud_points) {
     if (fs::exists(dir / "plots" / name)) svgs[name] = Slurp(dir / "plots" / name);
   }
   data["svgs"] = svgs;
+  // The cloud gets what the rest of the page leaves of kPageBudget (6 bytes a point, base64).
+  const std::size_t rest = data.dump().size() + ReportAsset("html").size() +
+                           ReportAsset("style").size() + ReportAsset("script").size();
+  max_cloud_points = std::min(max_cloud_points, (kPageBudget - std::min(rest, kPageBudget)) / 8);
   if (fs::exists(dir / "keyframe_cloud.pcd") && max_cloud_points > 0) {
     ds::OrganizedCloud cloud = ds::ReadPcd((dir / "keyframe_cloud.pcd").string());
     std::vector<Eigen::Vector3f> points;

@@ -33,6 +33,7 @@ std::size_t WriteKeyframeCloud(
 /// Writes DIR/report.html from the files of a `planeslam run` output folder: summary.json,
 /// pose_graph.g2o and plane_map.json (required), metrics.json, config.yaml, frames.csv,
 /// trajectory_tum.txt, ground_truth_tum.txt, keyframe_cloud.pcd and plots/*.svg (when present).
+/// The cloud is thinned to at most `max_cloud_points` and to what keeps the page below 4.8 MB.
 /// Throws IoError naming the file when a required one is missing or malformed; nothing is
 /// written then. Returns false (nothing written) when the build carries no page.
 bool WriteRunReport(const std::string& dir, std::size_t max_cloud_points);
