@@ -111,7 +111,7 @@ void LogFrame(std::size_t index, double timestamp, const mapping::SlamFrameResul
   log << index << "," << ds::FormatRoundTrip(timestamp) << "," << result.keyframe << ","
       << result.planes << "," << result.matches << "," << result.tracked << "," << result.degenerate
       << "," << result.used_point_to_plane << "," << result.loop_closures << "," << result.refused
-      << ",ok\n";
+      << ",ok," << result.constrained_by << "," << result.weak_directions << "\n";
 }
 
 /// Loads frame `index`; a frame the sequence cannot read is recorded in `log` (frames.csv row,
@@ -129,7 +129,7 @@ std::optional<ds::Frame> LoadOrRecordBad(const RunInput& input, std::size_t inde
               << "planeslam run: " << (stop ? "error" : "warning") << ": frame " << index
               << (stop ? " stops the run" : " skipped") << ": " << bad.error << "\n";
     log->frame_log << index << "," << ds::FormatRoundTrip(bad.timestamp) << ",,,,,,,,,"
-                   << (stop ? "stopped" : "skipped") << "\n";
+                   << (stop ? "stopped" : "skipped") << ",,\n";
     log->bad_frames.push_back(std::move(bad));
     log->stopped_at_bad_frame = stop;
     return std::nullopt;
@@ -143,7 +143,7 @@ void ProcessFrames(const RunInput& input, const std::vector<std::size_t>& indice
                    mapping::SlamSystem& slam, FrameLoopLog* log) {
   ProgressBar progress("run", indices.size(), quiet);
   log->frame_log << "index,timestamp,keyframe,planes,matches,tracked,degenerate,point_to_plane,"
-                    "loop_closures,refused,status\n";
+                    "loop_closures,refused,status,constrained_by,weak_directions\n";
   for (std::size_t i : indices) {
     if (StopRequested()) {
       log->interrupted = true;
@@ -276,6 +276,7 @@ nlohmann::json SummaryJson(const std::string& input_name, const mapping::SlamSys
           {"refused_frames", stats.refused_frames},
           {"degenerate_frames", stats.degenerate_frames},
           {"point_to_plane_frames", stats.point_to_plane_frames},
+          {"prior_frames", stats.prior_frames},
           {"untracked_frames", stats.untracked_frames},
           {"map_planes", slam.map().size()},
           {"final_optimization",
@@ -308,9 +309,9 @@ void PrintReport(const mapping::SlamSystem& slam, const FrameLoopLog& log, const
               stats.loop_closures, slam.map().size());
   std::printf(
       "degenerate frames %zu (filled by point-to-plane alignment: %zu), untracked frames %zu "
-      "(refused by the prior gate: %zu)\n",
+      "(refused by the prior gate: %zu), frames with a direction from the prior %zu\n",
       stats.degenerate_frames, stats.point_to_plane_frames, stats.untracked_frames,
-      stats.refused_frames);
+      stats.refused_frames, stats.prior_frames);
   std::printf("loop candidates %zu, refused: degenerate %zu, few matches %zu, residual %zu\n",
               stats.loop_candidates, stats.loop_refused_degenerate, stats.loop_refused_matches,
               stats.loop_refused_residual);

@@ -149,6 +149,11 @@ std::vector<ScanPoint> VoxelDownsample(const std::vector<ScanPoint>& points, dou
   return out;
 }
 
+std::vector<ShapedPoint> ScanStructure(const datasets::OrganizedCloud& cloud,
+                                       const std::vector<std::int32_t>* labels, double voxel) {
+  return ShapePoints(VoxelDownsample(StructurePoints(cloud, labels), 0.5 * voxel), voxel);
+}
+
 double ScanReach(const datasets::OrganizedCloud& cloud) {
   std::vector<double> ranges;
   ranges.reserve(cloud.points.size() / 4 + 1);

@@ -125,10 +125,7 @@ OdometryStep PlaneOdometry::Step(double timestamp, const std::vector<detection::
           config_.local_map.voxel_size > 0 ? config_.local_map.voxel_size : reach / 100.0;
       map_ = std::make_unique<LocalVoxelMap>(voxel, config_.local_map.max_points_per_voxel);
     }
-    if (map_ != nullptr) {
-      const double voxel = map_->voxel_size();
-      structure = ShapePoints(VoxelDownsample(StructurePoints(*cloud, labels), 0.5 * voxel), voxel);
-    }
+    if (map_ != nullptr) structure = ScanStructure(*cloud, labels, map_->voxel_size());
   }
   double points_ms = std::chrono::duration<double, std::milli>(Clock::now() - t_points).count();
   if (!have_prev_) {
