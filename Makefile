@@ -8,10 +8,13 @@ JOBS ?= 2
 CMAKE_ARGS ?=
 RUN_ARGS ?=
 
-# Debian 12 packages the build needs (PCL without recommends: about a minute instead of many).
+# Debian 12 packages the build needs (PCL without recommends: about a minute instead of many);
+# pybind11, numpy, pytest: the Python module; parallel, slurm-wlm, munge: planeslam batch.
 DEB_PACKAGES := build-essential cmake ccache pkg-config libeigen3-dev libceres-dev liboctomap-dev \
   libpcl-dev libyaml-cpp-dev libgtest-dev libgmock-dev libcli11-dev libpng-dev zlib1g-dev \
-  nlohmann-json3-dev clang libclang-rt-14-dev python3
+  nlohmann-json3-dev clang libclang-rt-14-dev python3 \
+  pybind11-dev python3-dev python3-numpy python3-pytest \
+  parallel slurm-wlm munge nodejs chromium
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 SAN_BUILD_DIR ?= build-asan
@@ -27,6 +30,15 @@ deps:
 	  $(SUDO) apt-get update -q && \
 	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -q --no-install-recommends $$missing; \
 	fi
+	@# Debian's nodejs comes without npm (NodeSource's includes it and conflicts with Debian's npm).
+	@command -v npm >/dev/null || { $(SUDO) apt-get update -q && \
+	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -q --no-install-recommends npm; }
+	@$(MAKE) --no-print-directory web/node_modules/.package-lock.json
+
+# The report's pinned web packages (three.js, inlined into report.html; esbuild; playwright-core for
+# the browser test), reinstalled when package-lock.json is newer than the installed tree.
+web/node_modules/.package-lock.json: web/package-lock.json
+	npm ci --prefix web --no-audit --no-fund
 
 configure: deps
 	cmake -S . -B $(BUILD_DIR) -DCMAKE_BUILD_TYPE=Release $(CMAKE_ARGS)
@@ -44,7 +56,8 @@ test: build
 # off to keep the build short). The same build carries the libFuzzer targets.
 sanitize: deps
 	CC=clang CXX=clang++ cmake -S . -B $(SAN_BUILD_DIR) -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-	  -DPLANESLAM_SANITIZERS="address;undefined" -DPLANESLAM_WITH_PCL=OFF -DPLANESLAM_BUILD_FUZZERS=ON
+	  -DPLANESLAM_SANITIZERS="address;undefined" -DPLANESLAM_WITH_PCL=OFF -DPLANESLAM_BUILD_FUZZERS=ON \
+	  -DPLANESLAM_BUILD_PYTHON=OFF
 	cmake --build $(SAN_BUILD_DIR) -j$(JOBS)
 	cd $(SAN_BUILD_DIR) && ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
 	  ctest --output-on-failure -j$(JOBS)

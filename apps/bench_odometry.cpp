@@ -19,6 +19,7 @@
 #include "config_sections_registration.hpp"
 #include "detector_factory.hpp"
 #include "interrupt.hpp"
+#include "kitti_report.hpp"
 #include "planeslam/datasets/atomic_file.hpp"
 #include "planeslam/datasets/errors.hpp"
 #include "planeslam/datasets/sensor_config.hpp"
@@ -59,6 +60,7 @@ struct OdometryRun {
   ds::RpeResult rpe_frame, rpe_second;
   bool evaluated = false;
   EndPointDrift drift;  ///< set when there are two or more frames with ground truth
+  std::optional<ds::KittiOdometryResult> kitti;  ///< KITTI segment errors (KITTI ground truth)
 };
 
 /// What the plane registration said of the directions it could not see (ours only).
@@ -381,6 +383,25 @@ void WriteFramesCsv(const std::string& path, const BenchRuns& runs, const Motion
   ds::WriteFileAtomic(path, csv.str());
 }
 
+/// KITTI's segment errors of every run when the sequence's ground truth is KITTI-style; prints
+/// them (or why there are none) and says whether there are any.
+bool KittiOfRuns(const std::string& sequence_path, BenchRuns* runs) {
+  if (!HasKittiGroundTruth(sequence_path)) return false;
+  bool any = false;
+  for (OdometryRun* run : runs->All()) {
+    run->kitti = KittiErrors(runs->ground_truth, run->trajectory);
+    if (!run->kitti) continue;
+    if (!run->kitti->ok) {
+      std::printf("KITTI segment errors: %s\n", run->kitti->message.c_str());
+      return false;
+    }
+    std::printf("\n%s: %s", run->name.c_str(),
+                FormatKittiErrors(*run->kitti, runs->ground_truth.size()).c_str());
+    any = true;
+  }
+  return any;
+}
+
 void PrintFooter(const std::vector<const OdometryRun*>& runs) {
   if (runs.size() == 2) {
     std::printf("\nspeed ratio (median ms pcl_gicp / ours): %.1fx\n",
@@ -421,6 +442,7 @@ void WriteJson(const std::string& path, std::size_t n, int second_frames, bool h
       j["drift_world_m"] = {run->drift.error.x(), run->drift.error.y(), run->drift.error.z()};
       j["path_length_m"] = run->drift.path_length;
     }
+    if (run->kitti && run->kitti->ok) j["kitti"] = KittiErrorsJson(*run->kitti);
     if (run == &runs.ours) {
       j["decimation"] = decimation;
       j["degenerate_frames"] = runs.degeneracy.frames;
@@ -466,6 +488,7 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
 #endif
   PrintConstraints(runs.degeneracy, diff ? &*diff : nullptr, "pcl_gicp");
   const bool have_drift = DriftOfRuns(&runs);
+  KittiOfRuns(sequence_path, &runs);
   PrintFooter(std::as_const(runs).All());
 
   if (!options.out_dir.empty()) {

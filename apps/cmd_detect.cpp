@@ -15,12 +15,14 @@
 
 #include "cli_common.hpp"
 #include "command_registry.hpp"
+#include "config_sections_app.hpp"
 #include "detector_factory.hpp"
 #include "planeslam/datasets/atomic_file.hpp"
 #include "planeslam/datasets/errors.hpp"
 #include "planeslam/datasets/image_io.hpp"
 #include "planeslam/datasets/sensor_config.hpp"
 #include "planeslam/datasets/sequence_factory.hpp"
+#include "report.hpp"
 #include "sensor_profiles.hpp"
 
 namespace planeslam::app {
@@ -124,6 +126,25 @@ bool IsPng(const std::string& path) {
   return ext == ".png";
 }
 
+/// report.html (report.enabled) beside the other outputs; a failure there is a warning.
+void WriteReport(const Config& config, const std::string& path, const std::string& planes_json,
+                 const ds::OrganizedCloud& cloud, const detection::Segmentation& seg,
+                 const std::vector<std::uint8_t>& grey, const std::string& config_yaml) {
+  const auto& report = config.Get<ReportConfig>("report");
+  if (!report.enabled) return;
+  if (!ReportAvailable()) {
+    std::cerr << "planeslam detect: " << ReportUnavailableReason() << "\n";
+    return;
+  }
+  try {
+    DetectReportInput input{nlohmann::json::parse(planes_json), &cloud, &seg.labels, &grey,
+                            config_yaml};
+    WriteDetectReport(path, input, static_cast<std::size_t>(report.cloud_points));
+  } catch (const std::exception& e) {
+    std::cerr << "planeslam detect: warning: report.html not written: " << e.what() << "\n";
+  }
+}
+
 class DetectCommand : public Command {
  public:
   std::string Name() const override { return "detect"; }
@@ -157,7 +178,7 @@ class DetectCommand : public Command {
         "Writes planes.json (n.p = d in the sensor frame, covariance of (n, d)), labels.png "
         "(16-bit "
         "plane id, 0 = none),\nlabels_color.png, classes.png (grid methods: planar green, "
-        "spherical blue, linear red, sparse grey),\nsegmented.ply and config.yaml.");
+        "spherical blue, linear red, sparse grey),\nsegmented.ply, config.yaml and report.html (report.enabled).");
   }
 
   int Run() override {
@@ -242,6 +263,7 @@ class DetectCommand : public Command {
     if (have_classes) ds::WritePngRgb((dir / "classes.png").string(), classes);
     ds::WriteFileAtomic((dir / "segmented.ply").string(), ply);
     ds::WriteFileAtomic((dir / "config.yaml").string(), config_yaml);
+    WriteReport(config, (dir / "report.html").string(), json, cloud, seg, grey, config_yaml);
     const auto t3 = Clock::now();
 
     if (!options_.quiet) {
@@ -269,8 +291,9 @@ class DetectCommand : public Command {
       }
       if (seg.planes.size() > shown)
         std::printf("  ... %zu more in planes.json\n", seg.planes.size() - shown);
-      std::printf("output     %s (planes.json, labels.png, labels_color.png%s, segmented.ply)\n",
-                  out_.c_str(), have_classes ? ", classes.png" : "");
+      std::printf("output     %s (planes.json, labels.png, labels_color.png%s, segmented.ply%s)\n",
+                  out_.c_str(), have_classes ? ", classes.png" : "",
+                  std::filesystem::exists(dir / "report.html") ? ", report.html" : "");
     }
     return 0;
   }

@@ -1,5 +1,6 @@
-// `planeslam eval ape|rpe REF EST`: trajectory metrics with evo's semantics (default) or the TUM
-// RGB-D benchmark tools' (--tum), printed as `name value` lines, optionally as JSON and SVG plots.
+// `planeslam eval ape|rpe|kitti REF EST`: trajectory metrics with evo's semantics (default) or the
+// TUM RGB-D benchmark tools' (--tum), and the KITTI odometry benchmark's segment errors (kitti),
+// printed as `name value` lines, optionally as JSON and SVG plots.
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -10,8 +11,11 @@
 
 #include "cli_common.hpp"
 #include "command_registry.hpp"
+#include "kitti_report.hpp"
 #include "planeslam/datasets/atomic_file.hpp"
+#include "exit_codes.hpp"
 #include "planeslam/datasets/errors.hpp"
+#include "planeslam/datasets/kitti_odometry_eval.hpp"
 #include "planeslam/datasets/trajectory_eval.hpp"
 #include "planeslam/datasets/trajectory_io.hpp"
 #include "svg_plot.hpp"
@@ -21,6 +25,7 @@ namespace planeslam::app {
 namespace {
 
 namespace ds = planeslam::datasets;
+constexpr double kPi = 3.14159265358979323846;
 
 /// Python's repr of a float (evo prints its delta that way): shortest digits, ".0" if integral.
 std::string PyFloat(double v) {
@@ -67,14 +72,16 @@ class EvalCommand : public Command {
  public:
   std::string Name() const override { return "eval"; }
   std::string Summary() const override {
-    return "Trajectory error (APE/RPE) like evo or the TUM RGB-D tools, with SVG plots";
+    return "Trajectory error (APE/RPE) like evo or the TUM RGB-D tools, KITTI segment errors";
   }
   int Order() const override { return 30; }
 
   void Setup(CLI::App& sub) override {
-    sub.add_option("metric", metric_, "ape (absolute pose error) or rpe (relative pose error)")
+    sub.add_option("metric", metric_,
+                   "ape (absolute pose error), rpe (relative pose error) or kitti (the KITTI "
+                   "odometry benchmark's segment errors)")
         ->required()
-        ->check(CLI::IsMember({"ape", "rpe"}));
+        ->check(CLI::IsMember({"ape", "rpe", "kitti"}));
     sub.add_option("ref", ref_path_, "reference (ground-truth) trajectory file")->required();
     sub.add_option("est", est_path_, "estimated trajectory file")->required();
     sub.add_option("--format", format_,
@@ -113,6 +120,11 @@ class EvalCommand : public Command {
                    "scale applied to the estimate's positions (ape) or motions (rpe --tum), as the "
                    "TUM tools' --scale");
     sub.add_option("--seed", seed_, "rpe --tum: seed of the random pair sampling");
+    sub.add_option("--lengths", kitti_.lengths,
+                   "kitti: segment lengths [m] (default the benchmark's 100 200 ... 800)")
+        ->check(CLI::PositiveNumber);
+    sub.add_option("--step", kitti_.step, "kitti: a segment starts every STEP frames (default 10)")
+        ->check(CLI::Range(1, 1000000));
     sub.add_option("--json", json_path_, "also write the results as JSON to this file");
     sub.add_option("--plot", plot_dir_,
                    "write SVG plots (trajectories top view, error over time, error per pair) here");
@@ -132,7 +144,13 @@ class EvalCommand : public Command {
         "  planeslam eval rpe groundtruth.txt estimate.txt -d 10 -u f -r angle_deg\n"
         "  planeslam eval rpe groundtruth.txt estimate.txt --tum --fixed-delta --delta 1 "
         "--delta-unit s\n"
-        "  planeslam eval ape 00.txt 00_est.txt --format kitti -as --plot plots/ --json ape.json");
+        "  planeslam eval ape 00.txt 00_est.txt --format kitti -as --plot plots/ --json ape.json\n"
+        "  planeslam eval kitti poses.txt run/trajectory_kitti.txt     KITTI devkit segment "
+        "errors\n"
+        "\nkitti: for every 10th first frame and each length L of 100..800 m of the reference's\n"
+        "path, E = inv(inv(P_f) P_l) (inv(Q_f) Q_l) over the first frame l beyond L; translation\n"
+        "error |t(E)| / L in %, rotation angle(E) / L in deg/100 m, averaged over the segments\n"
+        "(as the devkit's evaluate_odometry.cpp); also per length. No alignment.");
   }
 
   int Run() override {
@@ -182,6 +200,7 @@ class EvalCommand : public Command {
     alignment.n_to_align = n_to_align_;
     const ds::PoseRelation relation = ds::ParsePoseRelation(relation_);
 
+    if (metric_ == "kitti") return RunKitti(ref, est, association);
     return metric_ == "ape" ? RunApe(ref, est, association, alignment, relation)
                             : RunRpe(ref, est, association, alignment, relation);
   }
@@ -366,6 +385,50 @@ class EvalCommand : public Command {
     return 0;
   }
 
+  int RunKitti(const ds::Trajectory& ref, const ds::Trajectory& est,
+               const ds::AssociationOptions& association) {
+    const std::vector<ds::IndexPair> pairs =
+        ds::AssociateTrajectories(ref, est, association, ref_path_, est_path_);
+    std::vector<Pose> gt, es;
+    for (const auto& [i, j] : pairs) {
+      gt.push_back(ref.poses[i]);
+      es.push_back(est.poses[j]);
+    }
+    const ds::KittiOdometryResult r = ds::EvaluateKittiOdometry(gt, es, kitti_);
+    if (!r.ok) return Fail(ref_path_ + ": " + r.message);
+    std::cout << FormatKittiErrors(r, pairs.size());
+    nlohmann::json j = KittiErrorsJson(r);
+    j["metric"] = "kitti";
+    j["reference"] = ref_path_;
+    j["estimate"] = est_path_;
+    j["pairs"] = pairs.size();
+    j["step"] = kitti_.step;
+    if (!plot_dir_.empty()) {
+      EnsureDirectory(plot_dir_);
+      std::vector<double> lengths, t_err, r_err;
+      for (const ds::KittiLengthErrors& l : r.per_length) {
+        lengths.push_back(l.length);
+        t_err.push_back(100.0 * l.t_err);
+        r_err.push_back(l.r_err * 180.0 / kPi * 100.0);
+      }
+      LineStyle style;
+      style.color = CycleColor(0);
+      SvgPlot t_plot("KITTI translation error per segment length", "segment length [m]",
+                     "translation error [%]");
+      t_plot.AddLine(lengths, t_err, style);
+      t_plot.AddScatter(lengths, t_err, CycleColor(0), "mean over the segments", 3.0);
+      t_plot.Write(plot_dir_ + "/kitti_translation.svg");
+      SvgPlot r_plot("KITTI rotation error per segment length", "segment length [m]",
+                     "rotation error [deg/100 m]");
+      r_plot.AddLine(lengths, r_err, style);
+      r_plot.AddScatter(lengths, r_err, CycleColor(0), "mean over the segments", 3.0);
+      r_plot.Write(plot_dir_ + "/kitti_rotation.svg");
+    }
+    WriteJson(j);
+    return kExitSuccess;
+  }
+
+  ds::KittiOdometryOptions kitti_;
   std::string metric_, ref_path_, est_path_, format_, ref_times_, est_times_;
   bool tum_ = false, align_ = false, correct_scale_ = false, align_origin_ = false;
   double t_max_diff_ = 0.01, t_offset_ = 0.0;

@@ -1,5 +1,6 @@
 // `planeslam simulate SCENE --out DIR`: a synthetic sequence with exact ground truth, written in
-// the TUM layout (pinhole) or as an organized PCD folder (spherical), see synthetic_writer.hpp.
+// the TUM layout (pinhole), as an organized PCD folder (spherical) or in the KITTI odometry layout
+// (rotating LiDAR), see synthetic_writer.hpp.
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -34,22 +35,28 @@ class SimulateCommand : public Command {
  public:
   std::string Name() const override { return "simulate"; }
   std::string Summary() const override {
-    return "Synthetic sequence (room, corridor, rubble) with exact poses, plane labels and planes";
+    return "Synthetic sequence (room, corridor, rubble, street) with exact poses, plane labels and "
+           "planes";
   }
   int Order() const override { return 40; }
 
   void Setup(CLI::App& sub) override {
-    sub.add_option("scene", scene_, "room (office-like), corridor (degenerate), rubble (unstructured)")
+    sub.add_option("scene", scene_,
+                   "room (office-like), corridor (degenerate), rubble (unstructured), street "
+                   "(urban block, 64-beam LiDAR)")
         ->required()
-        ->check(CLI::IsMember({"room", "corridor", "rubble"}));
+        ->check(CLI::IsMember({"room", "corridor", "rubble", "street"}));
     sub.add_option("-o,--out", out_, "output folder (created)")->required();
     sub.add_option("--frames", frames_, "number of frames (default: the scene's whole path)")
         ->check(CLI::Range(1, 1000000));
-    sub.add_option("--sensor", sensor_, "pinhole (depth camera, TUM layout) or spherical (scanner, PCD)")
-        ->check(CLI::IsMember({"pinhole", "spherical"}));
+    sub.add_option("--sensor", sensor_,
+                   "pinhole (depth camera, TUM layout), spherical (scanner, PCD) or lidar "
+                   "(rotating 64-beam, KITTI layout); default: the scene's (street: lidar, else "
+                   "pinhole)")
+        ->check(CLI::IsMember({"pinhole", "spherical", "lidar"}));
     noise_opt_ = sub.add_flag("--noise,!--no-noise", noise_,
                               "sensor noise on/off (default: simulation.noise, on)");
-    sub.add_option("--seed", seed_, "seed of the rubble layout and the noise")
+    sub.add_option("--seed", seed_, "seed of the rubble and street layouts and the noise")
         ->check(CLI::Range(0, 2147483647));
     AddConfigOptions(sub, options_);
     sub.footer(
@@ -58,9 +65,12 @@ class SimulateCommand : public Command {
         "  planeslam simulate corridor --out c --frames 100 --no-noise\n"
         "  planeslam simulate rubble --out r --sensor spherical --seed 7\n"
         "  planeslam simulate room --out r --config config/sim_room.yaml --set simulation.rate=15\n"
+        "  planeslam simulate street --out street --set simulation.laps=0.3\n"
         "Writes depth/*.png + depth.txt + intrinsics.yaml (pinhole) or *.pcd + scanner.yaml\n"
         "(spherical), labels/*.png (plane id per pixel), groundtruth.txt, planes.json, preview.png\n"
-        "and config.yaml.");
+        "and config.yaml. The LiDAR (street) writes the KITTI odometry layout: velodyne/*.bin,\n"
+        "labels/*.label (plane id per return), times.txt, poses.txt (scanner poses in the first\n"
+        "scan's frame, KITTI 3x4), calib.txt, scanner.yaml, planes.json, preview.png, config.yaml.");
   }
 
   int Run() override {
@@ -74,6 +84,8 @@ class SimulateCommand : public Command {
     if (MaybePrintConfig(options_, config)) return 0;
 
     const auto sequence = MakeSyntheticSequence(scene_, config);
+    sim.sensor = sequence->config().sensor;  // config.yaml names the sensor used
+    sim.rate = sequence->config().trajectory.rate;
     EnsureDirectory(out_);
     ds::WriteFileAtomic((std::filesystem::path(out_) / "config.yaml").string(), config.ToYaml());
     InstallInterruptHandlers();
@@ -100,7 +112,7 @@ class SimulateCommand : public Command {
                 << "written    " << summary.files + 1 << " files, " << HumanBytes(summary.bytes)
                 << " in " << out_ << "\n";
       char line[128];
-      std::snprintf(line, sizeof(line), "time       %.2f s (%.1f ms/frame incl. PNG encoding)\n",
+      std::snprintf(line, sizeof(line), "time       %.2f s (%.1f ms/frame incl. file encoding)\n",
                     seconds, 1000.0 * seconds / std::max<std::size_t>(1, summary.frames));
       std::cout << line << "preview    " << summary.preview_path << "\n";
     }

@@ -11,16 +11,23 @@ namespace {
 namespace ds = planeslam::datasets;
 
 void VisitSimulation(FieldVisitor& v, SimulationConfig& c) {
-  v.Field("scene", c.scene, "synthetic world: room (office), corridor (degenerate), rubble",
-          {"room", "corridor", "rubble"});
-  v.Field("seed", c.seed, "seed of the rubble layout and the sensor noise [-]", 0, 2147483647);
-  v.Field("sensor", c.sensor, "pinhole depth camera or spherical scanner", {"pinhole", "spherical"});
+  v.Field("scene", c.scene,
+          "synthetic world: room (office), corridor (degenerate), rubble, street (LiDAR)",
+          {"room", "corridor", "rubble", "street"});
+  v.Field("seed", c.seed, "seed of the rubble and street layouts and the sensor noise [-]", 0,
+          2147483647);
+  v.Field("sensor", c.sensor,
+          "pinhole depth camera, spherical scanner, lidar (rotating, KITTI layout) or auto (the "
+          "scene's: lidar for the street, else pinhole)",
+          {"auto", "pinhole", "spherical", "lidar"});
   v.Field("noise", c.noise, "sensor noise on (false: exact ranges)");
   v.Field("frames", c.frames, "number of frames [frames]; 0 = the scene's whole path", 0, 1000000);
-  v.Field("rate", c.rate, "frame rate [Hz]", 0.1, 1000.0);
+  v.Field("rate", c.rate, "frame rate [Hz]; 0 = the scene's (30, street 10)", 0.0, 1000.0);
   v.Field("speed", c.speed, "camera speed along the path [m/s]; 0 = scene default", 0.0, 100.0);
   v.Field("laps", c.laps,
-          "room/rubble: turns around the centre when frames = 0 [turns]; 0 = default", 0.0, 100.0);
+          "room/rubble/street: turns around the centre (street: the block) when frames = 0 "
+          "[turns]; 0 = default",
+          0.0, 100.0);
   v.Field("length", c.length, "corridor: run length when frames = 0 [m]; 0 = default (10 m)",
           0.0, 25.0);
 }
@@ -85,6 +92,27 @@ std::vector<std::string> ValidateSpherical(const ds::SphericalSimConfig& c) {
   return problems;
 }
 
+void VisitLidar(FieldVisitor& v, ds::LidarSimConfig& c) {
+  v.Field("columns", c.columns, "firings per turn [1] (2083: 0.1728 deg, HDL-64E at 10 Hz)", 1,
+          100000);
+  v.Field("min_range", c.min_range, "closer returns are dropped [m]", 0.0, 1000.0);
+  v.Field("max_range", c.max_range, "farther returns are dropped [m]", 0.01, 10000.0);
+  v.Field("range_sigma", c.range_sigma, "range noise sigma (constant) [m]", 0.0, 10.0);
+  v.Field("noise_truncation", c.noise_truncation, "noise is a normal truncated here [sigma]", 0.5,
+          10.0);
+  v.Field("max_incidence_deg", c.max_incidence_deg,
+          "returns at a larger angle between ray and surface normal are dropped [deg]", 0.0, 90.0);
+  v.Field("dropout_rate", c.dropout_rate, "probability of losing any return at random [1]", 0.0,
+          1.0);
+  v.Field("motion_distortion", c.motion_distortion,
+          "cast each firing from the pose at its own time (points not de-skewed)");
+}
+
+std::vector<std::string> ValidateLidar(const ds::LidarSimConfig& c) {
+  if (c.min_range >= c.max_range) return {"min_range must be below max_range"};
+  return {};
+}
+
 PLANESLAM_REGISTER_CONFIG_SECTION(SimulationConfig, "simulation",
                                   "Synthetic world (planeslam simulate, and planeslam run without "
                                   "a sequence)",
@@ -95,6 +123,9 @@ PLANESLAM_REGISTER_CONFIG_SECTION(ds::PinholeSimConfig, "simulation_pinhole",
 PLANESLAM_REGISTER_CONFIG_SECTION(ds::SphericalSimConfig, "simulation_spherical",
                                   "Simulated spherical scanner (rows elevation, columns azimuth)",
                                   &VisitSpherical, &ValidateSpherical);
+PLANESLAM_REGISTER_CONFIG_SECTION(ds::LidarSimConfig, "simulation_lidar",
+                                  "Simulated rotating LiDAR (HDL-64E elevations, KITTI layout)",
+                                  &VisitLidar, &ValidateLidar);
 
 }  // namespace
 
@@ -103,13 +134,15 @@ datasets::SyntheticConfig MakeSyntheticConfig(const std::string& scene, const Co
   const ds::SceneKind kind = ds::ParseSceneKind(scene.empty() ? sim.scene : scene);
   ds::SyntheticConfig out = ds::SyntheticConfig::ForScene(kind);
   out.seed = static_cast<std::uint64_t>(sim.seed);
-  out.sensor = sim.sensor;
+  if (sim.sensor != "auto") out.sensor = sim.sensor;
   out.pinhole = config.Get<ds::PinholeSimConfig>("simulation_pinhole");
   out.spherical = config.Get<ds::SphericalSimConfig>("simulation_spherical");
+  out.lidar = config.Get<ds::LidarSimConfig>("simulation_lidar");
   out.pinhole.noise = sim.noise;
   out.spherical.noise = sim.noise;
+  out.lidar.noise = sim.noise;
   out.trajectory.frames = sim.frames;
-  out.trajectory.rate = sim.rate;
+  if (sim.rate > 0.0) out.trajectory.rate = sim.rate;
   if (sim.speed > 0.0) out.trajectory.speed = sim.speed;
   if (sim.laps > 0.0) out.trajectory.laps = sim.laps;
   if (sim.length > 0.0) out.trajectory.length = sim.length;

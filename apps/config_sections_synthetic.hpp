@@ -10,14 +10,15 @@
 
 namespace planeslam::app {
 
-/// YAML section "simulation": the scene, the sensor and the camera path.
+/// YAML section "simulation": the scene, the sensor and the camera path. Sections
+/// "simulation_pinhole", "simulation_spherical" and "simulation_lidar" hold the sensors.
 struct SimulationConfig {
-  std::string scene = "room";      ///< room, corridor or rubble (`planeslam run` default)
-  int seed = 1;                    ///< rubble layout and sensor noise [1]
-  std::string sensor = "pinhole";  ///< pinhole (depth camera) or spherical (scanner)
+  std::string scene = "room";      ///< room, corridor, rubble or street (`planeslam run` default)
+  int seed = 1;                    ///< rubble and street layouts and sensor noise [1]
+  std::string sensor = "auto";     ///< pinhole, spherical, lidar or auto (the scene's default)
   bool noise = true;               ///< sensor noise on (off: exact ranges)
   int frames = 0;                  ///< number of frames; 0 = the scene's path (laps or length)
-  double rate = 30.0;              ///< frame rate [Hz]
+  double rate = 0.0;               ///< frame rate [Hz]; 0 = scene default (30, street 10)
   double speed = 0.0;              ///< along the path [m/s]; 0 = scene default
   double laps = 0.0;               ///< loop scenes: turns when frames = 0 [1]; 0 = default
   double length = 0.0;             ///< corridor: run length when frames = 0 [m]; 0 = default

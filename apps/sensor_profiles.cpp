@@ -86,10 +86,13 @@ std::optional<ProfileChoice> RecognizeSimulation(const fs::path& folder) {
     const YAML::Node sim = root["simulation"];
     if (!sim || !sim.IsMap()) return std::nullopt;
     const std::string scene = sim["scene"] ? sim["scene"].as<std::string>() : "?";
-    const std::string sensor = sim["sensor"] ? sim["sensor"].as<std::string>() : "pinhole";
+    std::string sensor = sim["sensor"] ? sim["sensor"].as<std::string>() : "auto";
+    if (sensor == "auto") sensor = scene == "street" ? "lidar" : "pinhole";
     const std::string why =
         "planeslam simulate output (config.yaml: scene " + scene + ", " + sensor + " sensor)";
     if (sensor == "pinhole") return Choice("synthetic", why);
+    // The simulated rotating LiDAR writes the KITTI layout with the HDL-64E's geometry.
+    if (sensor == "lidar") return Choice("kitti", why + ", KITTI layout");
     return ProfileChoice{nullptr, why + ", no profile for the simulated scanner"};
   } catch (const YAML::Exception&) {
     return std::nullopt;
@@ -161,7 +164,7 @@ ProfileChoice RecognizeFolder(const fs::path& folder) {
     case ds::SequenceLayout::kIclNuim:
       return Choice("icl-nuim", "ICL-NUIM layout (associations.txt)");
     case ds::SequenceLayout::kKittiBin:
-      return Choice("kitti", "KITTI Velodyne layout (.bin scans)");
+      return Choice("kitti", "KITTI Velodyne layout (.bin scans or velodyne/)");
     case ds::SequenceLayout::kPcdFolder:
       return RecognizePcd(FirstWithExtension(folder, ".pcd"));
   }

@@ -235,7 +235,11 @@ SvgPlot::Layout SvgPlot::ComputeLayout() const {
     yr.Add(boxes_[i].min);
     yr.Add(boxes_[i].max);
   }
-  if (boxes_.empty()) xr.Pad(0.03);
+  for (std::size_t i = 0; i < categories_.size(); ++i) {
+    xr.Add(static_cast<double>(i) + 0.5);
+    xr.Add(static_cast<double>(i) + 1.5);
+  }
+  if (boxes_.empty() && categories_.empty()) xr.Pad(0.03);
   yr.Pad(0.05);
   double sx = l.pw / (xr.hi - xr.lo), sy = l.ph / (yr.hi - yr.lo);
   if (equal_aspect_) {  // widen the tighter axis around its centre
@@ -280,7 +284,7 @@ void SvgPlot::RenderGrid(std::ostream& o, const Layout& l) const {
   o << "<g stroke=\"#e0e0e0\" stroke-width=\"1\">\n";
   const double xstep = NiceStep(l.x_hi - l.x_lo, 8), ystep = NiceStep(l.y_hi - l.y_lo, 6);
   std::ostringstream labels;
-  if (boxes_.empty()) {
+  if (boxes_.empty() && categories_.empty()) {
     for (double x = std::ceil(l.x_lo / xstep) * xstep; x <= l.x_hi + 1e-9 * xstep; x += xstep) {
       o << "<line x1=\"" << Num(l.X(x)) << "\" y1=\"" << Num(l.top) << "\" x2=\"" << Num(l.X(x))
         << "\" y2=\"" << Num(l.top + l.ph) << "\"/>\n";
@@ -288,9 +292,11 @@ void SvgPlot::RenderGrid(std::ostream& o, const Layout& l) const {
              << "\" text-anchor=\"middle\">" << TickLabel(x, xstep) << "</text>\n";
     }
   } else {
-    for (std::size_t i = 0; i < boxes_.size(); ++i) {
+    const std::size_t n = boxes_.empty() ? categories_.size() : boxes_.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::string& label = boxes_.empty() ? categories_[i] : boxes_[i].label;
       labels << "<text x=\"" << Num(l.X(static_cast<double>(i) + 1.0)) << "\" y=\""
-             << Num(l.top + l.ph + 16) << "\" text-anchor=\"middle\">" << XmlEscape(boxes_[i].label)
+             << Num(l.top + l.ph + 16) << "\" text-anchor=\"middle\">" << XmlEscape(label)
              << "</text>\n";
     }
   }

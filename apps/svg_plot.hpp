@@ -60,6 +60,8 @@ class SvgPlot {
                              double vmin = 0.0, double vmax = 0.0, double radius = 2.5);
   /// A horizontal line across the plot at y (e.g. the mean or the RMSE).
   void AddHorizontalLine(double y, const LineStyle& style, const std::string& legend = "");
+  /// Named categories at x = 1, 2, ... as x tick labels (series over categories, e.g. sequences).
+  void SetXCategories(std::vector<std::string> labels) { categories_ = std::move(labels); }
   /// Box plots at x = 1, 2, ... with the boxes' labels as x tick labels.
   void AddBoxes(const std::vector<BoxStats>& boxes, SvgColor color = CycleColor(0));
 
@@ -100,6 +102,7 @@ class SvgPlot {
   bool equal_aspect_ = false;
   std::vector<Series> series_;
   std::vector<BoxStats> boxes_;
+  std::vector<std::string> categories_;
   SvgColor box_color_;
   std::string colorbar_label_;
   double cmin_ = 0.0, cmax_ = 0.0;

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -71,6 +72,25 @@ void MakeBadFiles(const fs::path& dir) {
   WriteText(dir / "absent_seq", "depth.txt", "1.0 depth/1.0.png\n1.1 depth/1.1.png\n");
   fs::create_directories(dir / "unsorted_seq/depth");
   WriteText(dir / "unsorted_seq", "depth.txt", "2.0 depth/2.png\n1.0 depth/1.png\n");
+  // KITTI scans: truncated mid-point, a NaN coordinate, no bytes, no return; and a KITTI
+  // sequence folder whose first scan is truncated.
+  const std::string point(16, '\0');
+  std::string good;
+  for (int i = 1; i <= 3; ++i) {
+    const float p[4] = {static_cast<float>(i), 1.0f, 0.5f, 0.3f};
+    good.append(reinterpret_cast<const char*>(p), sizeof(p));
+  }
+  WriteText(dir, "truncated.bin", good.substr(0, 40));
+  std::string nan = good;
+  const float nan_value = std::numeric_limits<float>::quiet_NaN();
+  nan.replace(20, 4, reinterpret_cast<const char*>(&nan_value), 4);
+  WriteText(dir, "nan.bin", nan);
+  WriteText(dir, "empty.bin", "");
+  WriteText(dir, "origin.bin", point + point);
+  fs::create_directories(dir / "kitti_seq/velodyne");
+  WriteText(dir / "kitti_seq/velodyne", "000000.bin", good.substr(0, 40));
+  WriteText(dir / "kitti_seq/velodyne", "000001.bin", good);
+  WriteText(dir / "kitti_seq", "times.txt", "0\n0.1\n");
   fs::create_directories(dir / "badpng_seq/depth");
   WriteText(dir / "badpng_seq", "depth.txt", "1.0 depth/1.png\n");
   WriteText(dir / "badpng_seq/depth", "1.png", "not a png");
@@ -98,12 +118,17 @@ TEST(BadInputMatrix, EveryCommandRefusesCleanly) {
        "not_yaml.yaml"},
       {"detect missing config", "detect {dir}/lying.pcd -c {dir}/nope.yaml --out {dir}/out",
        "nope.yaml"},
+      {"detect truncated bin", "detect {dir}/truncated.bin --out {dir}/out", "truncated.bin"},
+      {"detect NaN bin", "detect {dir}/nan.bin --out {dir}/out", "nan.bin"},
+      {"detect empty bin", "detect {dir}/empty.bin --out {dir}/out", "empty.bin"},
+      {"detect bin without returns", "detect {dir}/origin.bin --out {dir}/out", "origin.bin"},
       // run: sequences
       {"run missing folder", "run {dir}/no_such_seq --out {dir}/out", "no_such_seq"},
       {"run empty folder", "run {dir}/empty_seq --out {dir}/out", "empty_seq"},
       {"run absent frames", "run {dir}/absent_seq --out {dir}/out", "1.0.png"},
       {"run unsorted stamps", "run {dir}/unsorted_seq --out {dir}/out", "depth.txt"},
       {"run corrupt frame", "run {dir}/badpng_seq --out {dir}/out", "1.png"},
+      {"run truncated first scan", "run {dir}/kitti_seq --out {dir}/out", "000000.bin"},
       {"run bad key", "run -c {dir}/bad_key.yaml --out {dir}/out", "detection.epsilom"},
       // eval: trajectories
       {"eval missing", "eval ape {dir}/missing.txt {dir}/good.txt", "missing.txt"},
@@ -114,6 +139,7 @@ TEST(BadInputMatrix, EveryCommandRefusesCleanly) {
       {"eval duplicate", "eval ape {dir}/duplicate.txt {dir}/good.txt", "duplicate.txt:2"},
       {"eval inf", "eval ape {dir}/inf.txt {dir}/good.txt", "inf.txt:1"},
       {"eval no overlap", "eval ape {dir}/good.txt {dir}/late.txt", "late.txt"},
+      {"eval kitti too short", "eval kitti {dir}/good.txt {dir}/good.txt", "good.txt"},
       // graph
       {"graph missing", "graph optimize {dir}/missing.g2o --out {dir}/out/g.g2o", "missing.g2o"},
       {"graph truncated", "graph optimize {dir}/truncated.g2o --out {dir}/out/g.g2o",

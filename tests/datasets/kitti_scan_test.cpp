@@ -7,6 +7,8 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <iterator>
+#include <limits>
 
 #include "planeslam/datasets/errors.hpp"
 #include "planeslam/datasets/sequence_factory.hpp"
@@ -162,10 +164,36 @@ TEST(KittiScan, BadFilesAreIoErrors) {
   }
   EXPECT_EQ(ErrorOf([&] { ReadKittiScan((dir / "000000.bin").string()); }),
             (dir / "000000.bin").string() +
-                ": size 20 bytes is not a multiple of 16 (float32 x y z reflectance per point)");
+                ": truncated or not a KITTI scan: size 20 bytes is not a multiple of 16 (float32 "
+                "x y z reflectance per point)");
   { std::ofstream out(dir / "000000.bin", std::ios::binary); }
   EXPECT_EQ(ErrorOf([&] { ReadKittiScan((dir / "000000.bin").string()); }),
-            (dir / "000000.bin").string() + ": empty scan");
+            (dir / "000000.bin").string() + ": empty scan (0 bytes)");
+  // A whole scan cut short in the middle of a point.
+  const auto scan = SyntheticScan(4, 10, 5.0);
+  WriteScan(dir / "000001.bin", scan);
+  std::string whole;
+  {
+    std::ifstream in(dir / "000001.bin", std::ios::binary);
+    whole.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  { std::ofstream(dir / "000001.bin", std::ios::binary) << whole.substr(0, whole.size() - 7); }
+  EXPECT_NE(ErrorOf([&] { ReadKittiScan((dir / "000001.bin").string()); })
+                .find("000001.bin: truncated or not a KITTI scan: size 633 bytes"),
+            std::string::npos);
+  // NaN and infinite coordinates.
+  for (float bad : {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity()}) {
+    auto broken = scan;
+    broken[7].y() = bad;
+    WriteScan(dir / "000002.bin", broken);
+    EXPECT_EQ(ErrorOf([&] { ReadKittiScan((dir / "000002.bin").string()); }),
+              (dir / "000002.bin").string() +
+                  ": point 7 of 40 has a NaN or infinite coordinate (corrupt scan)");
+  }
+  // Points without a return.
+  WriteScan(dir / "000003.bin", std::vector<LidarPoint>(5, LidarPoint::Zero()));
+  EXPECT_EQ(ErrorOf([&] { ReadKittiScan((dir / "000003.bin").string()); }),
+            (dir / "000003.bin").string() + ": empty scan: all 5 points are at the origin");
   EXPECT_EQ(ErrorOf([&] { ReadKittiScan((dir / "nope.bin").string()); }),
             (dir / "nope.bin").string() + ": no such file");
 }
@@ -196,6 +224,37 @@ TEST(KittiScan, PosesByFrameNumberAndCalibration) {
   WriteScan(dir / "000009.bin", scan);
   EXPECT_EQ(ErrorOf([&] { OpenSequence(dir.string(), SensorConfig{}); }),
             (dir / "poses.txt").string() + ": has 4 poses, scan 000009.bin needs pose 9");
+}
+
+// KITTI's own tree: dataset/sequences/07/{velodyne/, times.txt, calib.txt} with the ground truth
+// in dataset/poses/07.txt. The sequence folder and its velodyne/ both open it, with the camera
+// poses turned into Velodyne poses (Tr^-1 P Tr) and the stamps of times.txt.
+TEST(KittiScan, KittiOdometryTreeFindsPosesTimesAndCalibration) {
+  const auto root = test::ScratchDir() / "dataset";
+  const auto seq_dir = root / "sequences" / "07";
+  fs::create_directories(seq_dir / "velodyne");
+  fs::create_directories(root / "poses");
+  const auto scan = SyntheticScan(64, 100, 5.0);
+  for (const char* name : {"000000.bin", "000001.bin", "000002.bin"}) {
+    WriteScan(seq_dir / "velodyne" / name, scan);
+  }
+  { std::ofstream(seq_dir / "times.txt") << "0.000000e+00\n1.036000e-01\n2.072000e-01\n"; }
+  // Tr: velodyne x forward = camera z, velodyne y left = camera -x, velodyne z up = camera -y.
+  { std::ofstream(seq_dir / "calib.txt") << "P0: 1 0 0 0 0 1 0 0 0 0 1 0\nTr: 0 -1 0 0 0 0 -1 0 1 0 0 0\n"; }
+  std::string poses;
+  for (int n = 0; n < 3; ++n) poses += "1 0 0 0 0 1 0 0 0 0 1 " + std::to_string(2 * n) + "\n";
+  { std::ofstream(root / "poses" / "07.txt") << poses; }
+  EXPECT_EQ(DetectLayout(seq_dir.string()), SequenceLayout::kKittiBin);
+  for (const fs::path folder : {seq_dir, seq_dir / "velodyne"}) {
+    const auto seq = OpenSequence(folder.string(), SensorConfig{});
+    ASSERT_EQ(seq->Size(), 3u);
+    EXPECT_EQ(seq->Name(), "07");
+    EXPECT_DOUBLE_EQ(seq->Timestamp(2), 0.2072);
+    ASSERT_TRUE(seq->GroundTruth(2).has_value());
+    // 4 m along camera z is 4 m forward along velodyne x.
+    EXPECT_NEAR(seq->GroundTruth(2)->translation().x(), 4.0, 1e-12);
+    EXPECT_NEAR(seq->GroundTruth(2)->translation().norm(), 4.0, 1e-12);
+  }
 }
 
 }  // namespace

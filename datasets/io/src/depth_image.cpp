@@ -38,24 +38,29 @@ OrganizedCloud DepthProjector::Project(const Image16& depth, const std::string& 
 
 void DepthProjector::Project(const Image16& depth, OrganizedCloud* cloud,
                              const std::string& source) const {
-  if (depth.width != intrinsics_.width || depth.height != intrinsics_.height) {
-    throw IoError(source, "depth image is " + std::to_string(depth.width) + "x" +
-                              std::to_string(depth.height) + " but the intrinsics are for " +
+  PLANESLAM_CHECK(depth.data.size() == static_cast<std::size_t>(depth.width) * depth.height,
+                  "image buffer size mismatch");
+  Project(depth.data.data(), depth.width, depth.height, cloud, source);
+}
+
+void DepthProjector::Project(const std::uint16_t* depth, int width, int height,
+                             OrganizedCloud* cloud, const std::string& source) const {
+  if (width != intrinsics_.width || height != intrinsics_.height) {
+    throw IoError(source, "depth image is " + std::to_string(width) + "x" +
+                              std::to_string(height) + " but the intrinsics are for " +
                               std::to_string(intrinsics_.width) + "x" +
                               std::to_string(intrinsics_.height));
   }
-  PLANESLAM_CHECK(depth.data.size() == static_cast<std::size_t>(depth.width) * depth.height,
-                  "image buffer size mismatch");
-  cloud->width = depth.width;
-  cloud->height = depth.height;
+  cloud->width = width;
+  cloud->height = height;
   cloud->model = SensorModel::kPinhole;
-  cloud->points.resize(depth.data.size());
+  cloud->points.resize(static_cast<std::size_t>(width) * height);
   const float* lut = depth_lut_.data();
-  const std::uint16_t* in = depth.data.data();
+  const std::uint16_t* in = depth;
   Eigen::Vector3f* out = cloud->points.data();
-  for (int v = 0; v < depth.height; ++v) {
+  for (int v = 0; v < height; ++v) {
     const float fy = row_factor_[v];
-    for (int u = 0; u < depth.width; ++u, ++in, ++out) {
+    for (int u = 0; u < width; ++u, ++in, ++out) {
       // NaN propagates through the products, so invalid pixels need no branch.
       const float z = lut[*in];
       *out = Eigen::Vector3f(col_factor_[u] * z, fy * z, z);

@@ -32,9 +32,9 @@ int ElevationRow(double elevation, const SensorConfig& config) {
 }  // namespace
 
 std::vector<LidarPoint> ParseKittiScan(const std::string& bytes, const std::string& name) {
-  if (bytes.empty()) throw IoError(name, "empty scan");
+  if (bytes.empty()) throw IoError(name, "empty scan (0 bytes)");
   if (bytes.size() % 16 != 0) {
-    throw IoError(name, "size " + std::to_string(bytes.size()) +
+    throw IoError(name, "truncated or not a KITTI scan: size " + std::to_string(bytes.size()) +
                             " bytes is not a multiple of 16 (float32 x y z reflectance per point)");
   }
   const std::size_t n = bytes.size() / 16;
@@ -44,6 +44,20 @@ std::vector<LidarPoint> ParseKittiScan(const std::string& bytes, const std::stri
   std::vector<LidarPoint> points(n);
   // Vector4f is 4 packed floats (16 bytes, no padding).
   std::memcpy(static_cast<void*>(points.data()), bytes.data(), bytes.size());
+  // A KITTI scan lists returns only: a NaN or infinite coordinate is a corrupt file, and a scan
+  // whose points all sit at the origin holds no return.
+  bool any_return = false;
+  for (std::size_t i = 0; i < n; ++i) {
+    const LidarPoint& p = points[i];
+    if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || !std::isfinite(p.z())) {
+      throw IoError(name, "point " + std::to_string(i) + " of " + std::to_string(n) +
+                              " has a NaN or infinite coordinate (corrupt scan)");
+    }
+    any_return = any_return || p.x() != 0.0f || p.y() != 0.0f || p.z() != 0.0f;
+  }
+  if (!any_return) {
+    throw IoError(name, "empty scan: all " + std::to_string(n) + " points are at the origin");
+  }
   return points;
 }
 
@@ -212,15 +226,30 @@ std::optional<Pose> ReadVeloToCam(const fs::path& calib) {
 std::unique_ptr<FileSequence> OpenKittiFolder(const std::string& folder,
                                               const SensorConfig& config) {
   config.ValidateOrThrow();
-  auto files = ListFrameFiles(folder, ".bin");
-  if (files.empty()) throw IoError(folder, "no .bin files in folder");
-  const fs::path dir(folder);
   std::error_code ec;
+  fs::path dir = fs::path(folder).lexically_normal();
+  if (dir.filename().empty()) dir = dir.parent_path();
+  // The scans: the folder's velodyne/ (a KITTI sequence folder) or the folder itself; the
+  // sequence's files (times.txt, poses.txt, calib.txt) sit beside velodyne/.
+  fs::path scans = dir;
+  if (fs::is_directory(dir / "velodyne", ec)) {
+    scans = dir / "velodyne";
+  } else if (dir.filename() == "velodyne" && dir.has_parent_path()) {
+    dir = dir.parent_path();
+  }
+  auto files = ListFrameFiles(scans.string(), ".bin");
+  if (files.empty()) throw IoError(scans.string(), "no .bin files in folder");
 
   std::vector<std::optional<Pose>> gt;
   std::string poses_path = config.lidar_poses_file;
   if (poses_path.empty() && fs::exists(dir / "poses.txt", ec))
     poses_path = (dir / "poses.txt").string();
+  // KITTI's own tree: dataset/sequences/NN/ with the ground truth in dataset/poses/NN.txt.
+  const fs::path kitti_poses =
+      dir.parent_path().parent_path() / "poses" / (dir.filename().string() + ".txt");
+  if (poses_path.empty() && dir.parent_path().filename() == "sequences" &&
+      fs::is_regular_file(kitti_poses, ec))
+    poses_path = kitti_poses.string();
   if (!poses_path.empty()) {
     const Trajectory poses = ReadKittiTrajectory(poses_path);
     const auto velo_to_cam = ReadVeloToCam(dir / "calib.txt");
@@ -270,10 +299,8 @@ std::unique_ptr<FileSequence> OpenKittiFolder(const std::string& folder,
       stamps.push_back(times[n]);
     }
   }
-  fs::path p = dir.lexically_normal();
-  if (p.filename().empty()) p = p.parent_path();
   return std::make_unique<FileSequence>(
-      p.filename().string(), std::move(files),
+      dir.filename().string(), std::move(files),
       [config](const std::string& path) { return ReadKittiRangeImage(path, config); },
       std::move(gt), std::move(stamps));
 }

@@ -46,6 +46,8 @@ SequenceLayout DetectLayout(const std::string& folder) {
   const fs::path dir(folder);
   if (fs::is_regular_file(dir / "depth.txt", ec)) return SequenceLayout::kTum;
   if (fs::is_regular_file(dir / "associations.txt", ec)) return SequenceLayout::kIclNuim;
+  // KITTI odometry sequence folder: velodyne/*.bin beside times.txt (and poses.txt, calib.txt).
+  if (fs::is_directory(dir / "velodyne", ec)) return SequenceLayout::kKittiBin;
   bool any = false, pcd = false, bin = false;
   for (const auto& entry : fs::directory_iterator(dir, ec)) {
     any = true;
@@ -59,7 +61,8 @@ SequenceLayout DetectLayout(const std::string& folder) {
   if (bin) return SequenceLayout::kKittiBin;
   if (!any) throw IoError(folder, "folder is empty");
   throw IoError(folder,
-                "no known layout (expected depth.txt, associations.txt, *.pcd or *.bin files)");
+                "no known layout (expected depth.txt, associations.txt, velodyne/, *.pcd or *.bin "
+                "files)");
 }
 
 std::unique_ptr<Sequence> OpenSequence(const std::string& folder, const SensorConfig& config) {

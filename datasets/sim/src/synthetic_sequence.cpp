@@ -3,6 +3,7 @@
 
 #include "planeslam/datasets/errors.hpp"
 #include "planeslam/datasets/synthetic_sequence.hpp"
+#include "planeslam/datasets/synthetic_street.hpp"
 #include "synthetic_random.hpp"
 
 namespace planeslam::datasets {
@@ -57,6 +58,15 @@ SyntheticTrajectoryConfig DefaultTrajectory(SceneKind kind) {
       c.pitch_deg = -25.0;
       c.yaw_amplitude_deg = 20.0;
       break;
+    case SceneKind::kStreet:
+      c.kind = "street";
+      c.rate = 10.0;
+      c.speed = 10.0;
+      c.laps = 1.15;
+      c.pitch_amplitude_deg = 0.1;
+      c.roll_amplitude_deg = 0.08;
+      c.height_amplitude = 0.005;
+      break;
   }
   return c;
 }
@@ -64,11 +74,15 @@ SyntheticTrajectoryConfig DefaultTrajectory(SceneKind kind) {
 int TrajectoryFrameCount(const SyntheticTrajectoryConfig& c) {
   if (c.frames > 0) return c.frames;
   PLANESLAM_CHECK(c.speed > 0 && c.rate > 0, "speed and rate must be positive");
+  if (c.kind == "street") {
+    return std::max(1, static_cast<int>(std::floor(StreetRoute(c).Duration() * c.rate)) + 1);
+  }
   const double path = c.kind == "line" ? c.length : c.laps * 2.0 * kPi * c.radius;
   return std::max(1, static_cast<int>(std::lround(path / c.speed * c.rate)));
 }
 
 Pose TrajectoryBodyPose(const SyntheticTrajectoryConfig& c, double t) {
+  if (c.kind == "street") return StreetRoute(c).ScannerPose(t);
   const double s = c.speed * t;  // arc length [m]
   Pose T = Pose::Identity();
   if (c.kind == "line") {
@@ -109,6 +123,7 @@ SyntheticConfig SyntheticConfig::ForScene(SceneKind scene) {
   SyntheticConfig c;
   c.scene = scene;
   c.trajectory = DefaultTrajectory(scene);
+  if (scene == SceneKind::kStreet) c.sensor = "lidar";
   return c;
 }
 
@@ -118,9 +133,12 @@ SyntheticSequence::SyntheticSequence(SyntheticConfig config)
     sensor_ = MakePinholeSensor(scene_, config_.pinhole);
   } else if (config_.sensor == "spherical") {
     sensor_ = MakeSphericalSensor(scene_, config_.spherical);
+  } else if (config_.sensor == "lidar") {
+    PLANESLAM_CHECK(config_.trajectory.rate > 0, "frame rate must be positive");
+    sensor_ = std::make_unique<RotatingLidar>(scene_, config_.lidar, 1.0 / config_.trajectory.rate);
   } else {
     throw ConfigError("unknown synthetic sensor '" + config_.sensor +
-                      "' (expected pinhole or spherical)");
+                      "' (expected pinhole, spherical or lidar)");
   }
   const int n = TrajectoryFrameCount(config_.trajectory);
   Pose body_sensor = Pose::Identity();
@@ -151,7 +169,15 @@ std::optional<Pose> SyntheticSequence::GroundTruth(std::size_t index) const {
 SyntheticFrame SyntheticSequence::Generate(std::size_t index) const {
   PLANESLAM_CHECK(index < poses_.size(), "frame " << index << " out of range");
   const std::uint64_t noise_seed = MixSeed(MixSeed(config_.seed) + index);
-  SyntheticRender render = sensor_->Render(poses_[index], noise_seed);
+  const auto* lidar = dynamic_cast<const RotatingLidar*>(sensor_.get());
+  SyntheticRender render =
+      lidar != nullptr && config_.lidar.motion_distortion
+          ? lidar->RenderMoving(
+                [this, index](double dt) {
+                  return TrajectoryBodyPose(config_.trajectory, stamps_[index] + dt);
+                },
+                noise_seed)
+          : sensor_->Render(poses_[index], noise_seed);
   SyntheticFrame out;
   out.frame.index = index;
   out.frame.timestamp = stamps_[index];
@@ -160,6 +186,7 @@ SyntheticFrame SyntheticSequence::Generate(std::size_t index) const {
   out.frame.T_world_sensor_gt = poses_[index];
   out.labels = std::move(render.labels);
   out.true_range = std::move(render.true_range);
+  out.intensity = std::move(render.intensity);
   return out;
 }
 

@@ -115,7 +115,7 @@ ImageRgb8 MakeSyntheticPreview(const SyntheticFrame& frame, double max_range) {
   return image;
 }
 
-std::string SyntheticPlanesJson(const SyntheticScene& scene) {
+std::string SyntheticPlanesJson(const SyntheticScene& scene, const std::string& frame) {
   nlohmann::json planes = nlohmann::json::array();
   for (const ScenePlane& p : scene.planes) {
     nlohmann::json polys = nlohmann::json::array();
@@ -141,9 +141,10 @@ std::string SyntheticPlanesJson(const SyntheticScene& scene) {
   }
   nlohmann::json doc = {
       {"scene", scene.name},
-      {"frame", "world, z up, metres; plane points p satisfy normal . p = d; polygons are convex "
-                "pieces, corners counter-clockwise seen from the normal side; a disk's polygon "
-                "is a 32-gon outline"},
+      {"frame", (frame.empty() ? std::string("world, z up") : frame) +
+                    ", metres; plane points p satisfy normal . p = d; polygons are convex "
+                    "pieces, corners counter-clockwise seen from the normal side; a disk's "
+                    "polygon is a 32-gon outline"},
       {"planes", planes},
       {"spheres", spheres},
       {"cylinders", cylinders}};
@@ -153,6 +154,7 @@ std::string SyntheticPlanesJson(const SyntheticScene& scene) {
 SyntheticWriteSummary WriteSyntheticSequence(const SyntheticSequence& sequence,
                                              const std::string& folder,
                                              const std::function<bool(std::size_t)>& progress) {
+  if (sequence.config().sensor == "lidar") return WriteSyntheticKitti(sequence, folder, progress);
   const bool pinhole = sequence.sensor().Model() == SensorModel::kPinhole;
   const fs::path root(folder);
   MakeDir((root / "labels").string());

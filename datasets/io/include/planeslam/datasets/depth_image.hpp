@@ -1,6 +1,7 @@
 #pragma once
 /// Depth images to organized clouds by the pinhole model: x = (u - cx) z / fx, y = (v - cy) z / fy,
 /// z = value / depth_scale; a zero (or out-of-range) depth is an invalid pixel (NaN).
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -23,6 +24,9 @@ class DepthProjector {
   OrganizedCloud Project(const Image16& depth, const std::string& source = "depth image") const;
   /// Same, into an existing cloud (reuses its storage).
   void Project(const Image16& depth, OrganizedCloud* cloud,
+               const std::string& source = "depth image") const;
+  /// Same, from a row-major width x height buffer of raw depth values read in place.
+  void Project(const std::uint16_t* depth, int width, int height, OrganizedCloud* cloud,
                const std::string& source = "depth image") const;
 
   const PinholeIntrinsics& intrinsics() const { return intrinsics_; }

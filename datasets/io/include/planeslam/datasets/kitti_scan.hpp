@@ -16,7 +16,8 @@ namespace planeslam::datasets {
 using LidarPoint = Eigen::Vector4f;
 
 /// Parses a KITTI .bin held in memory. Throws IoError naming `name` when the size is not a multiple
-/// of 16 bytes, the scan is empty, or it holds more points than the input limits allow.
+/// of 16 bytes (truncated), the scan is empty (no bytes, or every point at the origin), a point has
+/// a NaN or infinite coordinate, or it holds more points than the input limits allow.
 std::vector<LidarPoint> ParseKittiScan(const std::string& bytes, const std::string& name);
 /// Reads a KITTI .bin file (see ParseKittiScan).
 std::vector<LidarPoint> ReadKittiScan(const std::string& path);
@@ -51,11 +52,14 @@ int RecoverRings(const std::vector<LidarPoint>& scan, std::vector<int>* rings);
 OrganizedCloud ReadKittiRangeImage(const std::string& path, const SensorConfig& config,
                                    RangeProjectionStats* stats = nullptr);
 
-/// A folder of KITTI .bin scans, in natural file-name order. Ground truth: config.lidar_poses_file
-/// or the folder's poses.txt (KITTI odometry format, 12 numbers a line, the pose of scan N on line
-/// N, N taken from the file name); if the folder has calib.txt with a `Tr:` line (velodyne to
-/// camera), the camera poses are converted to velodyne poses Tr^-1 P Tr. Timestamps: the folder's
-/// times.txt (one per line, indexed like the poses) when present, else from the file names.
+/// A folder of KITTI .bin scans, in natural file-name order: a bare folder of scans, or a KITTI
+/// odometry sequence folder (scans in its velodyne/; `folder` may also name velodyne/ itself).
+/// Ground truth: config.lidar_poses_file, else the sequence folder's poses.txt, else KITTI's own
+/// tree's dataset/poses/NN.txt for dataset/sequences/NN (KITTI odometry format, 12 numbers a line,
+/// the pose of scan N on line N, N taken from the file name); if the sequence folder has calib.txt
+/// with a `Tr:` line (velodyne to camera), the camera poses are converted to velodyne poses
+/// Tr^-1 P Tr. Timestamps: the sequence folder's times.txt (one per line, indexed like the poses)
+/// when present, else from the file names.
 std::unique_ptr<FileSequence> OpenKittiFolder(const std::string& folder,
                                               const SensorConfig& config);
 

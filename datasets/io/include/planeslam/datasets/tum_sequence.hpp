@@ -60,6 +60,8 @@ class DepthImageSequence : public Sequence {
   double depth_scale() const { return depth_scale_; }
   /// Frames with an associated ground-truth pose.
   std::size_t GroundTruthCount() const;
+  /// Frame `index`'s list entry: stamp, depth file, ground-truth pose.
+  const Item& item(std::size_t index) const { return items_.at(index); }
 
  private:
   std::string name_;

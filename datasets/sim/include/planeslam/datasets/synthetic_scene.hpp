@@ -19,9 +19,10 @@ enum class SceneKind {
   kRoom,      ///< office-like room (6 x 5 x 2.8 m): walls, floor, ceiling, table, boxes, door recess
   kCorridor,  ///< 30 m corridor, open ends: plane registration cannot observe motion along x
   kRubble,    ///< small tilted slabs, spheres and cylinders on a ground plane: unstructured
+  kStreet,    ///< urban block for LiDAR (synthetic_street.hpp)
 };
 
-/// "room", "corridor", "rubble".
+/// "room", "corridor", "rubble", "street".
 std::string SceneName(SceneKind kind);
 /// Inverse of SceneName; throws ConfigError naming the accepted values.
 SceneKind ParseSceneKind(const std::string& name);
@@ -73,7 +74,8 @@ struct SyntheticScene {
   Eigen::AlignedBox3d Bounds() const;
 };
 
-/// Builds scene `kind`. `seed` only matters for rubble (layout of the pieces).
+/// Builds scene `kind`. `seed` only matters for rubble (layout of the pieces) and street
+/// (buildings, cars and furniture).
 SyntheticScene MakeScene(SceneKind kind, std::uint64_t seed = 1);
 
 /// Exact nearest intersection of a ray with a scene (the reference the fast casters are tested

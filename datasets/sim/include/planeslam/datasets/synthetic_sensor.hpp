@@ -64,6 +64,8 @@ struct SyntheticRender {
   /// dropouts; NaN where the ray hits nothing [m]. Primitives lying wholly beyond the maximum
   /// range are not cast, so a value beyond the maximum range may belong to a farther surface.
   std::vector<float> true_range;
+  /// Reflectance in [0, 1] per pixel (rotating LiDAR only; empty for the other sensors).
+  std::vector<float> intensity;
 };
 
 /// Ray caster for one scene and one sensor. Thread-safe: Render() is const.

@@ -13,16 +13,19 @@
 #include <string>
 
 #include "planeslam/datasets/sequence.hpp"
+#include "planeslam/datasets/synthetic_lidar.hpp"
 #include "planeslam/datasets/synthetic_scene.hpp"
 #include "planeslam/datasets/synthetic_sensor.hpp"
 
 namespace planeslam::datasets {
 
 /// Smooth camera path. "loop": circles `laps` times around `center` at `radius`, so it passes its
-/// start again (a loop closure); "line": a straight run along +x from `start`.
+/// start again (a loop closure); "line": a straight run along +x from `start`; "street": the car's
+/// route around the street scene's central block (synthetic_street.hpp: `speed` on the straights,
+/// `laps`, and the pitch, roll and height amplitudes as its suspension motion).
 /// Values of 0 for speed/radius/height mean "the scene's default" (see DefaultTrajectory()).
 struct SyntheticTrajectoryConfig {
-  std::string kind = "loop";  ///< "loop" or "line"
+  std::string kind = "loop";  ///< "loop", "line" or "street"
   int frames = 0;             ///< number of frames; 0 = enough for `laps` laps (or `length`)
   double rate = 30.0;         ///< frame rate [Hz]
   double speed = 0.4;         ///< along the path [m/s]
@@ -43,7 +46,8 @@ struct SyntheticTrajectoryConfig {
 };
 
 /// The default path of each scene (room: outward-looking loop at r 0.8 m; corridor: straight run;
-/// rubble: inward-looking loop at r 3.8 m around the pile).
+/// rubble: inward-looking loop at r 3.8 m around the pile; street: 1.15 laps around the block at
+/// 10 m/s, 10 Hz).
 SyntheticTrajectoryConfig DefaultTrajectory(SceneKind kind);
 
 /// Number of frames the config asks for (resolves frames = 0).
@@ -56,12 +60,13 @@ Pose TrajectoryBodyPose(const SyntheticTrajectoryConfig& config, double t);
 struct SyntheticConfig {
   SceneKind scene = SceneKind::kRoom;
   std::uint64_t seed = 1;         ///< rubble layout and sensor noise
-  std::string sensor = "pinhole";  ///< "pinhole" or "spherical"
+  std::string sensor = "pinhole";  ///< "pinhole", "spherical" or "lidar" (rotating, KITTI layout)
   PinholeSimConfig pinhole;
   SphericalSimConfig spherical;
+  LidarSimConfig lidar;
   SyntheticTrajectoryConfig trajectory;
 
-  /// Defaults for `scene` (its trajectory).
+  /// Defaults for `scene` (its trajectory and sensor: lidar for the street, else pinhole).
   static SyntheticConfig ForScene(SceneKind scene);
 };
 
@@ -70,6 +75,7 @@ struct SyntheticFrame {
   Frame frame;    ///< cloud (sensor frame), timestamp, ground-truth pose
   Image16 labels;  ///< plane id per pixel (0 = none), same size as the cloud
   std::vector<float> true_range;  ///< noise-free depth (pinhole) / range (spherical), NaN = none
+  std::vector<float> intensity;   ///< reflectance per pixel (lidar), else empty
 };
 
 class SyntheticSequence : public Sequence {
