@@ -6,9 +6,11 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <sstream>
 #include <utility>
 #include <vector>
 
@@ -24,6 +26,7 @@
 #include "planeslam/datasets/sequence_factory.hpp"
 #include "planeslam/datasets/trajectory_eval.hpp"
 #include "planeslam/datasets/trajectory_io.hpp"
+#include "planeslam/registration/local_map.hpp"
 #include "planeslam/registration/plane_odometry.hpp"
 #ifdef PLANESLAM_HAVE_PCL_BASELINES
 #include "pcl/baselines.hpp"
@@ -52,6 +55,7 @@ struct OdometryRun {
   std::string name;
   ds::Trajectory trajectory;     ///< T_world_sensor per frame, first frame at its ground truth
   std::vector<double> times_ms;  ///< per frame after the first
+  std::vector<Pose> motions;     ///< T_prev_curr per frame after the first
   int failures = 0;              ///< frames where the method fell back to the prior
   ds::RpeResult rpe_frame, rpe_second;
   bool evaluated = false;
@@ -66,13 +70,22 @@ struct DegeneracyReport {
   int filled_prior = 0;            ///< of those, filled (in part) from the constant-velocity prior
   int translation_directions = 0;  ///< undetermined translation axes over all frames
   Eigen::Vector3d abs_world_axis_sum = Eigen::Vector3d::Zero();  ///< sum of their |axis|, world
+  /// Per frame after the first: what constrained it (registration::ConstraintSource) and how
+  /// many directions the planes left open.
+  std::vector<std::string> sources;
+  std::vector<int> weak_directions;
+  int translation_from_prior = 0;  ///< frames with a translation direction left to the prior
 
   void Add(const registration::OdometryStep& step, const Pose& T_world_prev) {
     const registration::RegistrationResult& r = step.registration;
+    if (step.first_frame) return;
+    sources.push_back(registration::ConstraintSource(r));
+    weak_directions.push_back(static_cast<int>(r.degenerate_directions.size()));
     if (!r.degenerate) return;
     ++frames;
     filled_icp += r.used_icp ? 1 : 0;
     filled_prior += r.used_prior ? 1 : 0;
+    translation_from_prior += r.prior_translations > 0 ? 1 : 0;
     for (const registration::Vector6d& d : r.degenerate_directions) {
       if (d.head<3>().norm() < 0.5) continue;  // a rotation axis
       ++translation_directions;
@@ -198,6 +211,7 @@ bool TrackSequence(const ds::Sequence& sequence, std::size_t n, const PlaneMetho
     runs->ours.trajectory.Add(frame.timestamp, step_ours.T_world_sensor);
     if (i > 0) {
       runs->ours.times_ms.push_back(ours_ms);
+      runs->ours.motions.push_back(step_ours.T_prev_curr);
       if (!step_ours.registration.converged) ++runs->ours.failures;
     }
 #ifdef PLANESLAM_HAVE_PCL_BASELINES
@@ -205,6 +219,7 @@ bool TrackSequence(const ds::Sequence& sequence, std::size_t n, const PlaneMetho
     if (i > 0) {
       T_world_gicp = T_world_gicp * step.T_prev_curr;
       runs->pcl.times_ms.push_back(step.time_ms);
+      runs->pcl.motions.push_back(step.T_prev_curr);
       if (!step.converged) ++runs->pcl.failures;
     }
     runs->pcl.trajectory.Add(frame.timestamp, T_world_gicp);
@@ -309,6 +324,65 @@ bool DriftOfRuns(BenchRuns* runs) {
   return true;
 }
 
+/// Per frame: the difference between our relative motion and the baseline's,
+/// E = M_baseline^-1 M_ours, as translation [m] and rotation angle [deg].
+struct MotionDifference {
+  std::vector<double> translation, rotation_deg;
+};
+
+MotionDifference CompareMotions(const OdometryRun& ours, const OdometryRun& baseline) {
+  MotionDifference diff;
+  const std::size_t n = std::min(ours.motions.size(), baseline.motions.size());
+  for (std::size_t i = 0; i < n; ++i) {
+    const Pose E = baseline.motions[i].inverse() * ours.motions[i];
+    diff.translation.push_back(E.translation().norm());
+    diff.rotation_deg.push_back(Eigen::AngleAxisd(E.linear()).angle() * 180.0 / M_PI);
+  }
+  return diff;
+}
+
+/// What constrained our frames, and how far each frame's motion is from the baseline's.
+void PrintConstraints(const DegeneracyReport& degeneracy, const MotionDifference* diff,
+                      const char* baseline) {
+  std::map<std::string, int> counts;
+  for (const std::string& s : degeneracy.sources) ++counts[s];
+  std::printf("constrained by:");
+  for (const auto& [source, count] : counts) std::printf(" %s %d,", source.c_str(), count);
+  std::printf(" translation from the prior on %d frames\n", degeneracy.translation_from_prior);
+  if (diff == nullptr || diff->translation.empty()) return;
+  int within = 0;
+  for (std::size_t i = 0; i < diff->translation.size(); ++i) {
+    within += diff->translation[i] <= 0.05 && diff->rotation_deg[i] <= 0.3 ? 1 : 0;
+  }
+  std::printf(
+      "per-frame relative motion vs %s: max %.2f cm, %.3f deg; within 5 cm and 0.3 deg on %d of "
+      "%zu frames\n",
+      baseline, 100.0 * *std::max_element(diff->translation.begin(), diff->translation.end()),
+      *std::max_element(diff->rotation_deg.begin(), diff->rotation_deg.end()), within,
+      diff->translation.size());
+}
+
+/// DIR/frames.csv: per frame what constrained our motion and, with the baseline, the
+/// difference from its motion.
+void WriteFramesCsv(const std::string& path, const BenchRuns& runs, const MotionDifference* diff) {
+  std::ostringstream csv;
+  csv << "index,timestamp,constrained_by,weak_directions,"
+      << "translation_vs_baseline_m,rotation_vs_baseline_deg\n";
+  const DegeneracyReport& d = runs.degeneracy;
+  for (std::size_t i = 0; i < d.sources.size(); ++i) {
+    csv << i + 1 << "," << ds::FormatRoundTrip(runs.ours.trajectory.stamps[i + 1]) << ","
+        << d.sources[i] << "," << d.weak_directions[i] << ",";
+    if (diff != nullptr && i < diff->translation.size()) {
+      csv << ds::FormatRoundTrip(diff->translation[i]) << ","
+          << ds::FormatRoundTrip(diff->rotation_deg[i]);
+    } else {
+      csv << ",";
+    }
+    csv << "\n";
+  }
+  ds::WriteFileAtomic(path, csv.str());
+}
+
 /// KITTI's segment errors of every run when the sequence's ground truth is KITTI-style; prints
 /// them (or why there are none) and says whether there are any.
 bool KittiOfRuns(const std::string& sequence_path, BenchRuns* runs) {
@@ -348,7 +422,7 @@ void WriteTrajectories(const std::string& out_dir, const BenchRuns& runs) {
 }
 
 void WriteJson(const std::string& path, std::size_t n, int second_frames, bool have_drift,
-               int decimation, const BenchRuns& runs) {
+               int decimation, const BenchRuns& runs, const MotionDifference* diff) {
   nlohmann::json out = nlohmann::json::array();
   for (const OdometryRun* run : runs.All()) {
     nlohmann::json j = {{"method", run->name},
@@ -374,6 +448,16 @@ void WriteJson(const std::string& path, std::size_t n, int second_frames, bool h
       j["degenerate_frames"] = runs.degeneracy.frames;
       j["filled_by_point_to_plane"] = runs.degeneracy.filled_icp;
       j["filled_from_prior"] = runs.degeneracy.filled_prior;
+      j["translation_from_prior_frames"] = runs.degeneracy.translation_from_prior;
+      nlohmann::json sources = nlohmann::json::object();
+      for (const std::string& source : runs.degeneracy.sources) {
+        sources[source] = sources.value(source, 0) + 1;
+      }
+      j["constrained_by"] = sources;
+      if (diff != nullptr && !diff->translation.empty()) {
+        j["motion_vs_baseline"] = {{"translation_m", diff->translation},
+                                   {"rotation_deg", diff->rotation_deg}};
+      }
     }
     out.push_back(std::move(j));
   }
@@ -398,13 +482,22 @@ int RunOdometryBench(const std::string& sequence_path, const Config& config,
   PrintSetup(sequence_path, n, second, ours, options);
   PrintTable(std::as_const(runs).All());
   PrintDegeneracy(runs.ours, runs.degeneracy, n);
+  std::optional<MotionDifference> diff;
+#ifdef PLANESLAM_HAVE_PCL_BASELINES
+  diff = CompareMotions(runs.ours, runs.pcl);
+#endif
+  PrintConstraints(runs.degeneracy, diff ? &*diff : nullptr, "pcl_gicp");
   const bool have_drift = DriftOfRuns(&runs);
   KittiOfRuns(sequence_path, &runs);
   PrintFooter(std::as_const(runs).All());
 
-  if (!options.out_dir.empty()) WriteTrajectories(options.out_dir, runs);
+  if (!options.out_dir.empty()) {
+    WriteTrajectories(options.out_dir, runs);
+    WriteFramesCsv(options.out_dir + "/frames.csv", runs, diff ? &*diff : nullptr);
+  }
   if (!options.json_path.empty()) {
-    WriteJson(options.json_path, n, second.frames, have_drift, ours.config.decimation, runs);
+    WriteJson(options.json_path, n, second.frames, have_drift, ours.config.decimation, runs,
+              diff ? &*diff : nullptr);
   }
   return 0;
 }

@@ -41,7 +41,8 @@ void LogFrame(std::size_t index, double timestamp, const mapping::SlamFrameResul
   log << index << "," << ds::FormatRoundTrip(timestamp) << "," << result.keyframe << ","
       << result.planes << "," << result.matches << "," << result.tracked << "," << result.degenerate
       << "," << result.used_point_to_plane << "," << result.loop_closures << "," << result.refused
-      << "," << result.closures_rejected << "," << result.closures_retracted << ",ok\n";
+      << "," << result.closures_rejected << "," << result.closures_retracted << ",ok,"
+      << result.constrained_by << "," << result.weak_directions << "\n";
 }
 
 /// The trajectory, plane map, pose graph, effective configuration and frame log.
@@ -134,7 +135,7 @@ RunSession::RunSession(Config config, const std::string& method, std::string inp
   keep_keyframe_clouds_ = want_octomap_ || (report.enabled && report.cloud_points > 0);
   keyframe_voxel_ = want_octomap_ ? octomap.downsample_voxel : 0.05;
   frame_log_ << "index,timestamp,keyframe,planes,matches,tracked,degenerate,point_to_plane,"
-                "loop_closures,refused,closures_rejected,closures_retracted,status\n";
+                "loop_closures,refused,closures_rejected,closures_retracted,status,constrained_by,weak_directions\n";
   wall_start_ = Clock::now();
 }
 
@@ -168,7 +169,7 @@ mapping::SlamFrameResult RunSession::Track(std::size_t index, ds::Frame& frame) 
 
 void RunSession::RecordBadFrame(BadFrame bad, bool stop) {
   frame_log_ << bad.index << "," << ds::FormatRoundTrip(bad.timestamp) << ",,,,,,,,,,,"
-             << (stop ? "stopped" : "skipped") << "\n";
+             << (stop ? "stopped" : "skipped") << ",,\n";
   bad_frames_.push_back(std::move(bad));
   stopped_at_bad_frame_ = stop;
 }
@@ -226,6 +227,7 @@ std::string RunSession::Write(const std::string& out_dir) {
       {"refused_frames", stats.refused_frames},
       {"degenerate_frames", stats.degenerate_frames},
       {"point_to_plane_frames", stats.point_to_plane_frames},
+      {"prior_frames", stats.prior_frames},
       {"untracked_frames", stats.untracked_frames},
       {"map_planes", slam_->map().size()},
       {"final_optimization",
@@ -263,9 +265,9 @@ void RunSession::PrintReport(const std::string& ate_line, const std::string& out
               stats.loop_closures, slam_->map().size());
   std::printf(
       "degenerate frames %zu (filled by point-to-plane alignment: %zu), untracked frames %zu "
-      "(refused by the prior gate: %zu)\n",
+      "(refused by the prior gate: %zu), frames with a direction from the prior %zu\n",
       stats.degenerate_frames, stats.point_to_plane_frames, stats.untracked_frames,
-      stats.refused_frames);
+      stats.refused_frames, stats.prior_frames);
   std::printf("loop candidates %zu, refused: degenerate %zu, few matches %zu, residual %zu\n",
               stats.loop_candidates, stats.loop_refused_degenerate, stats.loop_refused_matches,
               stats.loop_refused_residual);

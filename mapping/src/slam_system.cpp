@@ -96,10 +96,20 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
   result.planes = static_cast<int>(segmentation.planes.size());
   ++stats_.frames;
 
+  // Range images: the frame's structure outside the planes, for the local map.
+  if (keyframes_.empty() && cloud.model != datasets::SensorModel::kPinhole) {
+    const double reach = registration::ScanReach(cloud);
+    if (reach > 0) local_map_ = std::make_unique<registration::LocalVoxelMap>(reach / 100.0, 20);
+  }
+  const std::vector<registration::ShapedPoint> structure =
+      local_map_ ? registration::ScanStructure(cloud, &segmentation.labels,
+                                               local_map_->voxel_size())
+                 : std::vector<registration::ShapedPoint>{};
   if (keyframes_.empty()) {
     if (cloud.model == datasets::SensorModel::kPinhole) {
       intrinsics_ = registration::EstimatePinholeIntrinsics(cloud);
     }
+    if (local_map_) local_map_->Insert(structure, T_world_first_, registration::ScanReach(cloud));
     AddKeyframe(result.index, T_world_first_, segmentation, cloud);
     frames_.push_back({timestamp, 0, Pose::Identity()});
     result.T_world_sensor = T_world_first_;
@@ -129,6 +139,11 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
     result.used_point_to_plane = registration::FillDegenerateWithPointToPlane(
         keyframe_cloud_, *intrinsics_, cloud, point_to_plane_config_, &reg);
   }
+  if (reg.converged && reg.degenerate && local_map_ && !structure.empty()) {
+    result.used_point_to_plane = registration::FillDegenerateFromLocalMap(
+        *local_map_, KeyframePose(keyframe.id), structure, {}, &reg);
+  }
+  result.weak_directions = static_cast<int>(reg.degenerate_directions.size());
   result.matches = static_cast<int>(reg.inliers.size());
   result.tracked = reg.converged;
   result.degenerate = reg.degenerate || !reg.converged;
@@ -158,6 +173,8 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
   const Matrix6d covariance = use_registration ? reg.covariance : prior.covariance;
   stats_.time_tracking_ms += ElapsedMs(track_start);
   if (!use_registration) ++stats_.untracked_frames;
+  result.constrained_by = use_registration ? registration::ConstraintSource(reg) : "prior";
+  if (result.constrained_by.find("prior") != std::string::npos) ++stats_.prior_frames;
   if (result.degenerate) ++stats_.degenerate_frames;
 
   // An update along directions the planes left open would feed the prior back into itself, so
@@ -166,8 +183,13 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
   // other: two walls leave a translation open but fix the rotation, whose rate then keeps
   // following an accelerating turn.
   bool translation_open = !use_registration, rotation_open = !use_registration;
-  for (const registration::Vector6d& direction : reg.degenerate_directions) {
-    (direction.head<3>().squaredNorm() > 0.5 ? translation_open : rotation_open) = true;
+  if (use_registration && reg.used_icp) {  // the points determined some of them
+    translation_open = reg.prior_translations > 0;
+    rotation_open = reg.prior_directions > reg.prior_translations;
+  } else {
+    for (const registration::Vector6d& direction : reg.degenerate_directions) {
+      (direction.head<3>().squaredNorm() > 0.5 ? translation_open : rotation_open) = true;
+    }
   }
   const bool hold = config_.hold_velocity_when_degenerate;
   velocity_.Add(timestamp, dt, T_keyframe_last_.inverse() * T_keyframe_curr,
@@ -175,6 +197,9 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
   T_keyframe_last_ = T_keyframe_curr;
   covariance_keyframe_last_ = covariance;
   result.T_world_sensor = KeyframePose(keyframe.id) * T_keyframe_curr;
+  if (local_map_) {
+    local_map_->Insert(structure, result.T_world_sensor, registration::ScanReach(cloud));
+  }
 
   const bool moved = T_keyframe_curr.translation().norm() > config_.keyframe_translation ||
                      RotationAngle(T_keyframe_curr) > config_.keyframe_rotation_deg * kDegToRad;
@@ -274,6 +299,7 @@ PoseGraphResult SlamSystem::Optimize(std::int64_t first_free) {
     // The whole graph moved: merges the new poses contradict are undone.
     stats_.map_splits += static_cast<std::size_t>(map_.SplitContradicted());
   }
+  if (local_map_) local_map_->Clear();  // its points sit at the poses before the optimisation
   ++stats_.optimizations;
   return result;
 }

@@ -10,6 +10,7 @@ std::vector<std::string> PlaneOdometryConfig::Validate() const {
   for (const auto& s : association.Validate()) p.push_back("association: " + s);
   for (const auto& s : registration.Validate()) p.push_back("registration: " + s);
   for (const auto& s : point_to_plane.Validate()) p.push_back("point_to_plane: " + s);
+  for (const auto& s : local_map.Validate()) p.push_back("local_map: " + s);
   if (!(prior_translation_sigma > 0)) p.push_back("prior_translation_sigma must be > 0");
   if (!(prior_rotation_sigma > 0)) p.push_back("prior_rotation_sigma must be > 0");
   if (!(max_prior_gap > 0)) p.push_back("max_prior_gap must be > 0");
@@ -34,6 +35,7 @@ void PlaneOdometry::Reset(const Pose& T_world_first) {
   have_prev_ = false;
   prev_planes_.clear();
   prev_cloud_ = {};
+  map_.reset();
   velocity_.Clear();
   last_dt_ = 0.0;
   frames_ = 0;
@@ -61,31 +63,71 @@ OdometryStep PlaneOdometry::Track(double timestamp, const datasets::OrganizedClo
                                   const detection::PlaneDetector& detector) {
   if (config_.decimation == 1) return Process(timestamp, cloud, detector.Detect(cloud));
   datasets::OrganizedCloud decimated = datasets::Decimate(cloud, config_.decimation);
-  OdometryStep step = Step(timestamp, detector.Detect(decimated).planes, &decimated);
+  const detection::Segmentation segmentation = detector.Detect(decimated);
+  OdometryStep step = Step(timestamp, segmentation.planes, &decimated, &segmentation.labels);
   prev_cloud_ = std::move(decimated);
   return step;
 }
 
 OdometryStep PlaneOdometry::Process(double timestamp, const datasets::OrganizedCloud& cloud,
                                     const detection::Segmentation& segmentation) {
-  OdometryStep step = Step(timestamp, segmentation.planes, &cloud);
+  OdometryStep step = Step(timestamp, segmentation.planes, &cloud, &segmentation.labels);
   prev_cloud_ = cloud;
   return step;
 }
 
 OdometryStep PlaneOdometry::Process(double timestamp, const std::vector<detection::Plane>& planes) {
-  OdometryStep step = Step(timestamp, planes, nullptr);
+  OdometryStep step = Step(timestamp, planes, nullptr, nullptr);
   prev_cloud_ = {};
   return step;
 }
 
+void PlaneOdometry::FillOpenDirections(const datasets::OrganizedCloud& cloud,
+                                       const std::vector<ShapedPoint>& structure,
+                                       RegistrationResult* reg) {
+  // A pinhole pair: projective association with the previous frame's dense image pairs every
+  // pixel, where the thinned local map keeps a few points per voxel (on the synthetic corridor's
+  // thin pipes the map's fills are the less accurate ones).
+  const bool pinhole_pair = cloud.model == datasets::SensorModel::kPinhole &&
+                            !prev_cloud_.empty() && prev_cloud_.width == cloud.width &&
+                            prev_cloud_.height == cloud.height;
+  if (pinhole_pair) {
+    if (!intrinsics_ && !intrinsics_estimated_) {
+      intrinsics_ = EstimatePinholeIntrinsics(prev_cloud_);
+      intrinsics_estimated_ = true;  // one attempt: the grid does not change
+    }
+    if (intrinsics_) {
+      FillDegenerateWithPointToPlane(prev_cloud_, *intrinsics_, cloud, config_.point_to_plane,
+                                     reg);
+    }
+  }
+  if (!pinhole_pair && map_ != nullptr && !structure.empty()) {
+    FillDegenerateFromLocalMap(*map_, T_world_sensor_, structure, config_.local_map, reg);
+  }
+}
+
 OdometryStep PlaneOdometry::Step(double timestamp, const std::vector<detection::Plane>& planes,
-                                 const datasets::OrganizedCloud* cloud) {
+                                 const datasets::OrganizedCloud* cloud,
+                                 const std::vector<std::int32_t>* labels) {
   using Clock = std::chrono::steady_clock;
   OdometryStep step;
   step.frame = frames_++;
   step.timestamp = timestamp;
   step.planes_curr = static_cast<int>(planes.size());
+  // The structure outside the planes and the scan's reach, for the local map.
+  const auto t_points = Clock::now();
+  std::vector<ShapedPoint> structure;
+  double reach = 0.0;
+  if (config_.use_point_to_plane && cloud != nullptr) {
+    reach = ScanReach(*cloud);
+    if (map_ == nullptr && reach > 0) {
+      const double voxel =
+          config_.local_map.voxel_size > 0 ? config_.local_map.voxel_size : reach / 100.0;
+      map_ = std::make_unique<LocalVoxelMap>(voxel, config_.local_map.max_points_per_voxel);
+    }
+    if (map_ != nullptr) structure = ScanStructure(*cloud, labels, map_->voxel_size());
+  }
+  double points_ms = std::chrono::duration<double, std::milli>(Clock::now() - t_points).count();
   if (!have_prev_) {
     step.first_frame = true;
     step.T_world_sensor = T_world_sensor_;
@@ -100,22 +142,10 @@ OdometryStep PlaneOdometry::Step(double timestamp, const std::vector<detection::
     step.association_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
     step.candidates = assoc.candidates;
     RegistrationResult reg = std::move(assoc.registration);
-    const bool can_align = config_.use_point_to_plane && cloud != nullptr && !cloud->empty() &&
-                           cloud->model == datasets::SensorModel::kPinhole &&
-                           !prev_cloud_.empty() && prev_cloud_.width == cloud->width &&
-                           prev_cloud_.height == cloud->height;
-    if (reg.degenerate && can_align) {
-      if (!intrinsics_ && !intrinsics_estimated_) {
-        intrinsics_ = EstimatePinholeIntrinsics(prev_cloud_);
-        intrinsics_estimated_ = true;  // one attempt: the grid does not change
-      }
-      if (intrinsics_) {
-        const auto t1 = Clock::now();
-        FillDegenerateWithPointToPlane(prev_cloud_, *intrinsics_, *cloud, config_.point_to_plane,
-                                       &reg);
-        step.point_to_plane_ms =
-            std::chrono::duration<double, std::milli>(Clock::now() - t1).count();
-      }
+    if (reg.degenerate && config_.use_point_to_plane && cloud != nullptr) {
+      const auto t1 = Clock::now();
+      FillOpenDirections(*cloud, structure, &reg);
+      points_ms += std::chrono::duration<double, std::milli>(Clock::now() - t1).count();
     }
     step.T_prev_curr = reg.T_prev_curr;
     step.covariance = reg.covariance;
@@ -129,6 +159,12 @@ OdometryStep PlaneOdometry::Step(double timestamp, const std::vector<detection::
     velocity_.Add(timestamp, dt, step.T_prev_curr);
     last_dt_ = dt;
   }
+  if (map_ != nullptr && !structure.empty()) {
+    const auto t2 = Clock::now();
+    map_->Insert(structure, T_world_sensor_, reach);
+    points_ms += std::chrono::duration<double, std::milli>(Clock::now() - t2).count();
+  }
+  step.point_to_plane_ms = points_ms;
   trajectory_.Add(timestamp, T_world_sensor_);
   have_prev_ = true;
   prev_stamp_ = timestamp;

@@ -253,6 +253,8 @@ RegistrationResult PriorOnlyResult(const Pose& prior_pose, const Matrix6d& prior
   fallback.covariance = prior_cov;
   fallback.degenerate = true;
   fallback.used_prior = true;
+  fallback.prior_directions = 6;
+  fallback.prior_translations = 3;
   for (int k = 0; k < 6; ++k) fallback.degenerate_directions.push_back(Vector6d::Unit(k));
   return fallback;
 }
@@ -426,6 +428,8 @@ void FillResult(const std::vector<MatchData>& data, const Eigen::Matrix3d& R,
   res->information = acc.H;
   res->degenerate = N.cols() > 0;
   res->used_prior = N.cols() > 0;
+  res->prior_directions = static_cast<int>(N.cols());
+  for (int k = 0; k < N.cols(); ++k) res->prior_translations += N.col(k).head<3>().norm() > 0.5;
   for (int k = 0; k < N.cols(); ++k) res->degenerate_directions.push_back(N.col(k));
   for (const MatchData& m : data) res->inliers.push_back(m.match);
   const double count = static_cast<double>(data.size());

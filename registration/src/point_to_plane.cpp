@@ -295,6 +295,9 @@ bool FillDegenerateWithPointToPlane(const datasets::OrganizedCloud& prev,
   result->covariance = cov;
   result->used_icp = true;
   result->used_prior = static_cast<int>(keep.size()) < k;
+  result->point_directions = static_cast<int>(keep.size());
+  result->prior_directions = k - static_cast<int>(keep.size());
+  for (int i : keep) result->prior_translations -= IsTranslation(D.col(i)) ? 1 : 0;
   return true;
 }
 

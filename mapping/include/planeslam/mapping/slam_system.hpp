@@ -29,6 +29,7 @@
 #include "planeslam/mapping/closure_consistency.hpp"
 #include "planeslam/mapping/plane_map.hpp"
 #include "planeslam/mapping/pose_graph.hpp"
+#include "planeslam/registration/local_map.hpp"
 #include "planeslam/registration/plane_association.hpp"
 #include "planeslam/registration/plane_registration.hpp"
 #include "planeslam/registration/point_to_plane.hpp"
@@ -152,6 +153,10 @@ struct SlamFrameResult {
   bool tracked = false;              ///< the registration converged (else the prior was used)
   bool degenerate = false;           ///< the planes left some direction undetermined
   bool used_point_to_plane = false;  ///< a degenerate direction was filled by point alignment
+  /// What constrained the motion: "planes", "points", "prior" joined by '+'
+  /// (registration::ConstraintSource), and how many directions the planes left open.
+  std::string constrained_by = "planes";
+  int weak_directions = 0;
   int loop_closures = 0;             ///< closures accepted at this frame
   bool refused = false;              ///< the result contradicted the motion prior and was not used
   int closures_rejected = 0;         ///< closure hypotheses rejected at this frame
@@ -199,6 +204,7 @@ struct SlamStats {
   std::size_t map_splits = 0;  ///< map-plane merges undone (observations no longer agreeing)
   std::size_t degenerate_frames = 0;
   std::size_t point_to_plane_frames = 0;  ///< degenerate frames filled by point alignment
+  std::size_t prior_frames = 0;  ///< frames with some direction (or all) from the motion prior
   std::size_t untracked_frames = 0;       ///< no usable plane registration (prior used)
   std::size_t refused_frames = 0;         ///< registration refused by the prior gate (prior used)
   std::size_t optimizations = 0;
@@ -292,6 +298,9 @@ class SlamSystem {
   /// of directions the planes cannot determine (none for spherical sensors).
   datasets::OrganizedCloud keyframe_cloud_;
   std::optional<datasets::PinholeIntrinsics> intrinsics_;
+  /// Range images (LiDAR): the local map of recent frames' structure that fills the directions
+  /// the planes leave open (registration/local_map.hpp); cleared when the graph moves the poses.
+  std::unique_ptr<registration::LocalVoxelMap> local_map_;
   PoseGraphConfig pose_graph_config_;
   PoseGraph graph_;
   PlaneMap map_;

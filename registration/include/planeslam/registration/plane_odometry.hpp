@@ -1,9 +1,11 @@
 #pragma once
 /// Frame-to-frame odometry on planes: association, closed-form motion with covariance, the
-/// point-to-plane fallback along degenerate directions, a constant-velocity prior, and the
-/// accumulated pose. Used by the SLAM pipeline and `planeslam bench odometry`.
+/// alignment of the scan's other structure to a local map of recent scans along the directions
+/// the planes leave open (local_map.hpp), a constant-velocity prior, and the accumulated pose.
+/// Used by `planeslam bench odometry` and the library's odometry example.
 #include <Eigen/Core>
 #include <cstddef>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -12,6 +14,7 @@
 #include "planeslam/datasets/trajectory.hpp"
 #include "planeslam/detection/plane.hpp"
 #include "planeslam/detection/plane_detector.hpp"
+#include "planeslam/registration/local_map.hpp"
 #include "planeslam/registration/plane_association.hpp"
 #include "planeslam/registration/plane_registration.hpp"
 #include "planeslam/registration/point_to_plane.hpp"
@@ -23,8 +26,10 @@ struct PlaneOdometryConfig {
   AssociationConfig association;
   RegistrationConfig registration;
   PointToPlaneConfig point_to_plane;
-  /// Fill the planes' degenerate directions by point-to-plane alignment of the clouds (pinhole
-  /// clouds only; intrinsics set or estimated from the grid).
+  LocalMapConfig local_map;
+  /// Fill the planes' degenerate directions from the points: projective point-to-plane against
+  /// the previous image for pinhole clouds (point_to_plane), and the structure outside the planes
+  /// aligned to a local map of recent scans (local_map) for any organized cloud.
   bool use_point_to_plane = true;
   /// Constant-velocity prior: 1-sigma of the change of motion between consecutive frames
   /// (acceleration over one frame interval) [m].
@@ -68,7 +73,7 @@ struct OdometryStep {
   int planes_curr = 0;
   int candidates = 0;  ///< association candidates after gating
   double association_ms = 0.0;
-  double point_to_plane_ms = 0.0;
+  double point_to_plane_ms = 0.0;  ///< alignment to the local map and its update
 };
 
 /// Feed frames in time order; keeps the previous frame's planes and cloud.
@@ -90,7 +95,7 @@ class PlaneOdometry {
   /// and were detected on it (no decimation here).
   OdometryStep Process(double timestamp, const datasets::OrganizedCloud& cloud,
                        const detection::Segmentation& segmentation);
-  /// Same with only the planes (no point-to-plane fallback).
+  /// Same with only the planes (no point alignment).
   OdometryStep Process(double timestamp, const std::vector<detection::Plane>& planes);
 
   const Pose& T_world_sensor() const { return T_world_sensor_; }
@@ -100,10 +105,16 @@ class PlaneOdometry {
   void Reset(const Pose& T_world_first = Pose::Identity());
 
  private:
-  /// Registers the planes; the caller then keeps the frame's cloud (or none) as prev_cloud_.
+  /// Registers the planes, fills what they leave open from the local map and adds the frame's
+  /// structure points (pixels not labelled as a plane in `labels`) to it.
   OdometryStep Step(double timestamp, const std::vector<detection::Plane>& planes,
-                    const datasets::OrganizedCloud* cloud);
+                    const datasets::OrganizedCloud* cloud, const std::vector<std::int32_t>* labels);
   MotionPrior Predict(double timestamp) const;
+  /// Fills the directions the planes left open in `reg`: projective point-to-plane against the
+  /// previous cloud when both are pinhole grids of one size, else the alignment of the frame's
+  /// structure points to the local map.
+  void FillOpenDirections(const datasets::OrganizedCloud& cloud,
+                          const std::vector<ShapedPoint>& structure, RegistrationResult* reg);
 
   PlaneOdometryConfig config_;
   Pose T_world_first_;
@@ -115,6 +126,7 @@ class PlaneOdometry {
   double prev_stamp_ = 0.0;
   std::vector<detection::Plane> prev_planes_;
   datasets::OrganizedCloud prev_cloud_;
+  std::unique_ptr<LocalVoxelMap> map_;  ///< created with the first cloud (its voxel size)
   VelocityModel velocity_;
   double last_dt_ = 0.0;  ///< interval of the last motion, the prior's unit of time
   std::size_t frames_ = 0;

@@ -91,6 +91,9 @@ struct RegistrationResult {
   std::vector<Vector6d> degenerate_directions;
   bool used_prior = false;  ///< some degenerate direction was filled from the prior
   bool used_icp = false;    ///< some degenerate direction was filled by point-to-plane alignment
+  int point_directions = 0;  ///< degenerate directions the point alignment determined
+  int prior_directions = 0;  ///< degenerate directions left to the prior
+  int prior_translations = 0;  ///< of those, translation directions
   std::vector<PlaneMatch> inliers;  ///< the matches used
   int iterations = 0;
   double residual_rms = 0.0;         ///< RMS of the offset residuals d_prev - predicted [m]

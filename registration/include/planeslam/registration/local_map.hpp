@@ -1,0 +1,152 @@
+#pragma once
+/// A local map of recent scans' structure points and the alignment of a scan against it, used
+/// where the planes leave directions of the motion open (a corridor's or a street's axis).
+///
+/// The map is a voxel hash in the style of KISS-ICP (Vizzo et al., RA-L 2023): a few points per
+/// voxel, nearest neighbours among the 27 voxels around a query, voxels farther from the sensor
+/// than the scans reach dropped. Each map point carries the shape of its neighbourhood in the
+/// scan it came from (principal axes of the points within one voxel edge): a surface constrains
+/// a query along its normal, an edge or a pole across its axis, scattered clutter in all three
+/// directions. The residual of a query q paired with map point m is (q - m)^T M (q - m), M the
+/// projector onto the constrained axes, so the same code serves facades, poles and trees.
+///
+/// Only the points outside the detected planes enter the map and the alignment: the planes
+/// already carry their own information, and their points would add only the noise of their
+/// normals along the open directions. Works on any organized cloud (range image or depth image).
+#include <Eigen/Core>
+#include <cstdint>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "planeslam/datasets/organized_cloud.hpp"
+#include "planeslam/registration/plane_registration.hpp"
+
+namespace planeslam::registration {
+
+struct LocalMapConfig {
+  /// Voxel edge of the map [m]; 0 = a hundredth of the first scan's reach (99th percentile of
+  /// its ranges), KISS-ICP's rule, which suits a depth camera and a LiDAR alike. Scans enter the
+  /// map thinned to half a voxel and are aligned thinned to 1.5 voxels.
+  double voxel_size = 0.0;
+  int max_points_per_voxel = 20;  ///< [-]
+  int max_iterations = 15;        ///< Gauss-Newton iterations per alignment [-]
+  /// A direction counts as determined by the points when they pin it down better than this
+  /// (1-sigma) [m] for translations, [rad] for rotations.
+  double max_translation_sigma = 0.02;
+  double max_rotation_sigma = 0.01;
+  /// A direction also needs this many pairs that constrain it (their residual moves by at least
+  /// half of a unit step along it) [-].
+  int min_support = 30;
+
+  std::vector<std::string> Validate() const;
+};
+
+/// A point of an organized cloud (sensor frame) and its pixel.
+struct ScanPoint {
+  Eigen::Vector3d position;
+  int row = 0;
+  int col = 0;
+};
+
+/// The structure points of an organized cloud: valid pixels whose label is not a plane (all
+/// valid pixels when `labels` is null or of another size).
+std::vector<ScanPoint> StructurePoints(const datasets::OrganizedCloud& cloud,
+                                       const std::vector<std::int32_t>* labels);
+
+/// One point per occupied voxel of edge `voxel` (the first one met), in input order.
+std::vector<ScanPoint> VoxelDownsample(const std::vector<ScanPoint>& points, double voxel);
+
+/// The 99th percentile of the valid points' distances from the sensor (0 without any) [m].
+double ScanReach(const datasets::OrganizedCloud& cloud);
+
+/// A point with the shape of its neighbourhood: the projector onto the axes along which the
+/// neighbourhood is thin (a surface's normal; for an edge or a pole, the plane across it).
+struct ShapedPoint {
+  Eigen::Vector3d position;
+  Eigen::Matrix3d shape;
+};
+
+/// The points of `points` whose neighbours within `radius` (among the same points) form a
+/// surface or an edge, with that shape; blobs and isolated points are left out.
+std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, double radius);
+
+/// What a scan gives the map and the alignment: its structure points (StructurePoints) thinned to
+/// half a voxel and shaped within one voxel (ShapePoints).
+std::vector<ShapedPoint> ScanStructure(const datasets::OrganizedCloud& cloud,
+                                       const std::vector<std::int32_t>* labels, double voxel);
+
+class LocalVoxelMap {
+ public:
+  struct MapPoint {
+    Eigen::Vector3d position;        ///< world frame
+    Eigen::Matrix3d shape;           ///< projector onto the constrained axes (world frame)
+  };
+
+  LocalVoxelMap(double voxel_size, int max_points_per_voxel);
+
+  /// Adds a scan's points (sensor frame, already thinned) at T_world_sensor and drops the voxels
+  /// farther than `reach` from the sensor (no pruning when reach <= 0).
+  void Insert(const std::vector<ShapedPoint>& points_sensor, const Pose& T_world_sensor,
+              double reach);
+  /// The nearest map point to q (world) among the 27 voxels around it whose shape agrees with
+  /// `shape` (world; same kind, axes within about 20 deg), or null.
+  const MapPoint* Nearest(const Eigen::Vector3d& q, const Eigen::Matrix3d& shape) const;
+  double voxel_size() const { return voxel_; }
+  bool empty() const { return voxels_.empty(); }
+  std::size_t size() const;
+  void Clear() { voxels_.clear(); }
+
+ private:
+  struct VoxelHash {
+    std::size_t operator()(const Eigen::Vector3i& v) const {
+      // The spatial hash of Teschner et al. 2003, as KISS-ICP and OpenVDB use.
+      return static_cast<std::size_t>((static_cast<std::uint32_t>(v.x()) * 73856093u) ^
+                                      (static_cast<std::uint32_t>(v.y()) * 19349669u) ^
+                                      (static_cast<std::uint32_t>(v.z()) * 83492791u));
+    }
+  };
+  Eigen::Vector3i Key(const Eigen::Vector3d& p) const;
+
+  double voxel_;
+  int max_points_;
+  std::unordered_map<Eigen::Vector3i, std::vector<MapPoint>, VoxelHash> voxels_;
+};
+
+struct MapAlignmentResult {
+  Pose T_prev_curr = Pose::Identity();
+  Eigen::MatrixXd information;  ///< of the coefficients along the directions, pairs alone (k x k)
+  Eigen::MatrixXd covariance;   ///< posterior of the coefficients (pairs + prior), k x k
+  int correspondences = 0;
+  std::vector<int> support;  ///< per direction: pairs that constrain it (see min_support)
+  double residual_rms = 0.0;  ///< of the whitened residuals sqrt((q-m)^T M (q-m)) [m]
+  int iterations = 0;
+  bool converged = false;
+  bool valid = false;  ///< enough pairs and a finite solution
+};
+
+/// Aligns `source` (current sensor frame) to `map` along `directions` (6 x k, unit columns in
+/// the tangent of geometry.hpp at the previous frame) starting from T_init = T_prev_curr; the
+/// previous frame is at T_world_prev in the map. The coefficients have the prior N(0,
+/// prior_covariance). Gauss-Newton with a Huber kernel, at most config.max_iterations steps.
+MapAlignmentResult AlignToLocalMap(const LocalVoxelMap& map, const Pose& T_world_prev,
+                                   const std::vector<ShapedPoint>& source, const Pose& T_init,
+                                   const Eigen::MatrixXd& directions,
+                                   const Eigen::MatrixXd& prior_covariance,
+                                   const LocalMapConfig& config);
+
+/// Aligns along result->degenerate_directions (prior: the result's covariance there, around the
+/// planes' pose) and, for the directions the points pin down, takes the aligned pose and the
+/// alignment's covariance there; sets used_icp and point_directions, and used_prior and
+/// prior_directions for what is still open. The other directions keep the planes' estimate.
+/// A correction outside the prior's 99.9% region is refused (the directions stay the prior's).
+/// Returns whether the points were used.
+bool FillDegenerateFromLocalMap(const LocalVoxelMap& map, const Pose& T_world_prev,
+                                const std::vector<ShapedPoint>& source,
+                                const LocalMapConfig& config, RegistrationResult* result);
+
+/// What constrained a registration: "planes", "points", "prior" joined by '+' in that order
+/// (e.g. "planes+points"); from its flags and direction counts.
+std::string ConstraintSource(const RegistrationResult& result);
+
+}  // namespace planeslam::registration

@@ -1,0 +1,416 @@
+#include "planeslam/registration/local_map.hpp"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace planeslam::registration {
+
+std::vector<std::string> LocalMapConfig::Validate() const {
+  std::vector<std::string> p;
+  if (!(voxel_size >= 0)) p.push_back("voxel_size must be >= 0 (0 = from the first scan)");
+  if (max_points_per_voxel < 1) p.push_back("max_points_per_voxel must be >= 1");
+  if (max_iterations < 1) p.push_back("max_iterations must be >= 1");
+  if (!(max_translation_sigma > 0)) p.push_back("max_translation_sigma must be > 0");
+  if (!(max_rotation_sigma > 0)) p.push_back("max_rotation_sigma must be > 0");
+  if (min_support < 0) p.push_back("min_support must be >= 0");
+  return p;
+}
+
+std::vector<ScanPoint> StructurePoints(const datasets::OrganizedCloud& cloud,
+                                       const std::vector<std::int32_t>* labels) {
+  const bool use_labels = labels != nullptr && labels->size() == cloud.points.size();
+  std::vector<ScanPoint> out;
+  out.reserve(cloud.points.size() / 4);
+  for (std::size_t i = 0; i < cloud.points.size(); ++i) {
+    const Eigen::Vector3f& p = cloud.points[i];
+    if (!p.allFinite()) continue;
+    if (use_labels && (*labels)[i] >= 1) continue;
+    const int row = static_cast<int>(i / static_cast<std::size_t>(cloud.width));
+    out.push_back({p.cast<double>(), row, static_cast<int>(i) - row * cloud.width});
+  }
+  return out;
+}
+
+namespace {
+
+struct KeyHash {
+  std::size_t operator()(const Eigen::Vector3i& v) const {
+    return static_cast<std::size_t>((static_cast<std::uint32_t>(v.x()) * 73856093u) ^
+                                    (static_cast<std::uint32_t>(v.y()) * 19349669u) ^
+                                    (static_cast<std::uint32_t>(v.z()) * 83492791u));
+  }
+};
+
+Eigen::Vector3i VoxelOf(const Eigen::Vector3d& p, double voxel) {
+  return (p / voxel).array().floor().cast<int>();
+}
+
+/// The projector onto the axes along which the neighbourhood of a point is thin: a variance
+/// below a ninth of the largest (a third in sigma) marks a constrained axis. A surface gives its
+/// normal, an edge or a pole the plane across it. A blob or too few neighbours give zero: such a
+/// point has no direction it pins down, and paired point to point with its nearest neighbour it
+/// would only hold the estimate where it starts. An edge must span two rows and two columns of
+/// the grid: a sparse scan (a LiDAR ring on the road, a far floor's pixel row) looks like a line
+/// that is only the sampling, and moves with the sensor.
+Eigen::Matrix3d NeighbourhoodShape(const std::vector<const ScanPoint*>& neighbours) {
+  if (neighbours.size() < 5) return Eigen::Matrix3d::Zero();
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  bool rows = false, cols = false;
+  for (const ScanPoint* q : neighbours) {
+    mean += q->position;
+    rows = rows || q->row != neighbours.front()->row;
+    cols = cols || q->col != neighbours.front()->col;
+  }
+  mean /= static_cast<double>(neighbours.size());
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (const ScanPoint* q : neighbours) {
+    cov.noalias() += (q->position - mean) * (q->position - mean).transpose();
+  }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
+  const Eigen::Vector3d lambda = es.eigenvalues();  // ascending
+  if (!(lambda(2) > 0)) return Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d shape = Eigen::Matrix3d::Zero();
+  for (int k = 0; k < 2; ++k) {
+    if (lambda(k) < lambda(2) / 9.0) {
+      shape.noalias() += es.eigenvectors().col(k) * es.eigenvectors().col(k).transpose();
+    }
+  }
+  if (shape.trace() > 1.5 && !(rows && cols)) return Eigen::Matrix3d::Zero();
+  return shape;
+}
+
+}  // namespace
+
+std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, double radius) {
+  std::unordered_map<Eigen::Vector3i, std::vector<int>, KeyHash> grid;
+  grid.reserve(points.size());
+  for (int i = 0; i < static_cast<int>(points.size()); ++i) {
+    grid[VoxelOf(points[i].position, radius)].push_back(i);
+  }
+  std::vector<ShapedPoint> shaped;
+  shaped.reserve(points.size());
+  std::vector<const ScanPoint*> neighbours;
+  const double r2 = radius * radius;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    neighbours.clear();
+    const Eigen::Vector3i key = VoxelOf(points[i].position, radius);
+    for (int dx = -1; dx <= 1; ++dx) {
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dz = -1; dz <= 1; ++dz) {
+          const auto it = grid.find(key + Eigen::Vector3i(dx, dy, dz));
+          if (it == grid.end()) continue;
+          for (int j : it->second) {
+            if ((points[j].position - points[i].position).squaredNorm() <= r2) {
+              neighbours.push_back(&points[j]);
+            }
+          }
+        }
+      }
+    }
+    const Eigen::Matrix3d shape = NeighbourhoodShape(neighbours);
+    if (!shape.isZero()) shaped.push_back({points[i].position, shape});
+  }
+  return shaped;
+}
+
+namespace {
+
+bool IsTranslation(const Eigen::VectorXd& dir) { return dir.tail<3>().norm() < 1e-9; }
+
+/// chi^2(m) 99.9% quantile by Wilson-Hilferty: m (1 - 2/(9m) + 3.09 sqrt(2/(9m)))^3.
+double Chi2Quantile999(double m) {
+  return m * std::pow(1.0 - 2.0 / (9.0 * m) + 3.09 * std::sqrt(2.0 / (9.0 * m)), 3);
+}
+
+Eigen::MatrixXd InverseOrZero(const Eigen::MatrixXd& a) {
+  const int k = static_cast<int>(a.rows());
+  const Eigen::MatrixXd s = 0.5 * (a + a.transpose());
+  Eigen::LDLT<Eigen::MatrixXd> ldlt(s);
+  if (!s.allFinite() || ldlt.info() != Eigen::Success || !ldlt.isPositive()) {
+    return Eigen::MatrixXd::Zero(k, k);
+  }
+  Eigen::MatrixXd inv = ldlt.solve(Eigen::MatrixXd::Identity(k, k));
+  return inv.allFinite() ? inv : Eigen::MatrixXd::Zero(k, k);
+}
+
+}  // namespace
+
+std::vector<ScanPoint> VoxelDownsample(const std::vector<ScanPoint>& points, double voxel) {
+  if (!(voxel > 0)) return points;
+  std::unordered_map<Eigen::Vector3i, char, KeyHash> seen;
+  seen.reserve(points.size());
+  std::vector<ScanPoint> out;
+  for (const auto& p : points) {
+    if (seen.emplace(VoxelOf(p.position, voxel), 1).second) out.push_back(p);
+  }
+  return out;
+}
+
+std::vector<ShapedPoint> ScanStructure(const datasets::OrganizedCloud& cloud,
+                                       const std::vector<std::int32_t>* labels, double voxel) {
+  return ShapePoints(VoxelDownsample(StructurePoints(cloud, labels), 0.5 * voxel), voxel);
+}
+
+double ScanReach(const datasets::OrganizedCloud& cloud) {
+  std::vector<double> ranges;
+  ranges.reserve(cloud.points.size() / 4 + 1);
+  for (std::size_t i = 0; i < cloud.points.size(); i += 4) {  // a sample is enough
+    if (cloud.points[i].allFinite()) ranges.push_back(cloud.points[i].cast<double>().norm());
+  }
+  if (ranges.empty()) return 0.0;
+  const auto nth = ranges.begin() + static_cast<std::ptrdiff_t>(0.99 * (ranges.size() - 1));
+  std::nth_element(ranges.begin(), nth, ranges.end());
+  return *nth;
+}
+
+LocalVoxelMap::LocalVoxelMap(double voxel_size, int max_points_per_voxel)
+    : voxel_(voxel_size > 0 ? voxel_size : 1.0), max_points_(std::max(1, max_points_per_voxel)) {}
+
+Eigen::Vector3i LocalVoxelMap::Key(const Eigen::Vector3d& p) const { return VoxelOf(p, voxel_); }
+
+std::size_t LocalVoxelMap::size() const {
+  std::size_t n = 0;
+  for (const auto& [key, points] : voxels_) n += points.size();
+  return n;
+}
+
+void LocalVoxelMap::Insert(const std::vector<ShapedPoint>& points_sensor,
+                           const Pose& T_world_sensor, double reach) {
+  const Eigen::Matrix3d R = T_world_sensor.linear();
+  for (const ShapedPoint& point : points_sensor) {
+    const Eigen::Vector3d p = T_world_sensor * point.position;
+    std::vector<MapPoint>& cell = voxels_[Key(p)];
+    if (static_cast<int>(cell.size()) >= max_points_) continue;
+    cell.push_back({p, R * point.shape * R.transpose()});
+  }
+  if (!(reach > 0)) return;
+  const Eigen::Vector3d origin = T_world_sensor.translation();
+  const double limit2 = (reach + voxel_) * (reach + voxel_);
+  for (auto it = voxels_.begin(); it != voxels_.end();) {
+    if ((it->second.front().position - origin).squaredNorm() > limit2) {
+      it = voxels_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+}
+
+const LocalVoxelMap::MapPoint* LocalVoxelMap::Nearest(const Eigen::Vector3d& q,
+                                                      const Eigen::Matrix3d& shape) const {
+  const Eigen::Vector3i key = Key(q);
+  const MapPoint* best = nullptr;
+  double best_d2 = std::numeric_limits<double>::infinity();
+  for (int dx = -1; dx <= 1; ++dx) {
+    for (int dy = -1; dy <= 1; ++dy) {
+      for (int dz = -1; dz <= 1; ++dz) {
+        const auto it = voxels_.find(key + Eigen::Vector3i(dx, dy, dz));
+        if (it == voxels_.end()) continue;
+        for (const MapPoint& m : it->second) {
+          // Same kind of structure, oriented alike: ||M_a - M_b||_F = sqrt(2) sin(angle) for
+          // two surfaces (about 20 deg at 0.5), at least 1 between a surface and an edge.
+          if ((m.shape - shape).squaredNorm() > 0.25) continue;
+          const double d2 = (m.position - q).squaredNorm();
+          if (d2 < best_d2) {
+            best_d2 = d2;
+            best = &m;
+          }
+        }
+      }
+    }
+  }
+  return best;
+}
+
+namespace {
+
+/// The Gauss-Newton sums of one iteration at T_prev_curr.
+struct PairSums {
+  Eigen::MatrixXd H;
+  Eigen::VectorXd g;
+  std::vector<int> support;
+  int count = 0;
+  double sum_sq = 0.0;
+};
+
+PairSums AccumulatePairs(const LocalVoxelMap& map, const Pose& T_world_prev,
+                         const std::vector<ShapedPoint>& source, const Pose& T,
+                         const Eigen::MatrixXd& D, const std::vector<char>& is_translation) {
+  const int k = static_cast<int>(D.cols());
+  PairSums s;
+  s.H = Eigen::MatrixXd::Zero(k, k);
+  s.g = Eigen::VectorXd::Zero(k);
+  s.support.assign(k, 0);
+  const Eigen::Matrix3d R_wp = T_world_prev.linear();
+  const Pose T_world_curr = T_world_prev * T;
+  // Residuals beyond a tenth of a voxel weigh less (Huber): the map is thinned to half a voxel,
+  // so a correct pair's residual is mostly well inside that.
+  const double huber = 0.1 * map.voxel_size();
+  const double max_distance2 = map.voxel_size() * map.voxel_size();
+  Eigen::MatrixXd J(3, k);
+  const Eigen::Matrix3d R_wc = T_world_curr.linear();
+  for (const ShapedPoint& point : source) {
+    const Eigen::Vector3d& p = point.position;
+    const Eigen::Vector3d q = T_world_curr * p;
+    const LocalVoxelMap::MapPoint* m = map.Nearest(q, R_wc * point.shape * R_wc.transpose());
+    if (m == nullptr) continue;
+    const Eigen::Vector3d r = q - m->position;
+    if (r.squaredNorm() > max_distance2) continue;
+    const Eigen::Matrix3d& M = m->shape;
+    // d q / d(dt, dtheta) at the previous frame (geometry.hpp): R_wp [I, -[R p]_x].
+    const Eigen::Vector3d rp = T.linear() * p;
+    J.noalias() = R_wp * (D.topRows<3>() - Skew(rp) * D.bottomRows<3>());
+    const Eigen::Vector3d Mr = M * r;
+    const double e2 = r.dot(Mr);
+    const double e = std::sqrt(e2);
+    const double w = e <= huber ? 1.0 : huber / e;
+    const Eigen::MatrixXd MJ = M * J;
+    s.H.noalias() += w * J.transpose() * MJ;
+    s.g.noalias() += w * J.transpose() * Mr;
+    const double lever = std::max(rp.norm(), 1e-9);
+    for (int i = 0; i < k; ++i) {
+      const double moved = std::sqrt(std::max(0.0, J.col(i).dot(MJ.col(i))));
+      if ((is_translation[i] ? moved : moved / lever) > 0.5) ++s.support[i];
+    }
+    ++s.count;
+    s.sum_sq += e2;
+  }
+  return s;
+}
+
+}  // namespace
+
+MapAlignmentResult AlignToLocalMap(const LocalVoxelMap& map, const Pose& T_world_prev,
+                                   const std::vector<ShapedPoint>& source, const Pose& T_init,
+                                   const Eigen::MatrixXd& D, const Eigen::MatrixXd& prior_covariance,
+                                   const LocalMapConfig& config) {
+  MapAlignmentResult res;
+  res.T_prev_curr = T_init;
+  const int k = static_cast<int>(D.cols());
+  res.information = Eigen::MatrixXd::Zero(k, k);
+  res.covariance = prior_covariance;
+  res.support.assign(k, 0);
+  if (k == 0 || D.rows() != 6 || prior_covariance.rows() != k || prior_covariance.cols() != k ||
+      map.empty() || source.empty() || !D.allFinite()) {
+    return res;
+  }
+  const Eigen::MatrixXd h_prior = InverseOrZero(prior_covariance);
+  std::vector<char> is_translation(k);
+  for (int i = 0; i < k; ++i) is_translation[i] = IsTranslation(D.col(i));
+  // Floor of the residual sigma: neighbouring pairs are correlated, so the information from
+  // their count is optimistic; a tenth of a voxel keeps it in check.
+  const double sigma_floor2 = std::pow(0.1 * map.voxel_size(), 2);
+  Eigen::VectorXd y = Eigen::VectorXd::Zero(k);
+  for (int it = 0; it < config.max_iterations; ++it) {
+    const PairSums s =
+        AccumulatePairs(map, T_world_prev, source, BoxPlus(T_init, D * y), D, is_translation);
+    res.iterations = it + 1;
+    if (s.count < std::max(config.min_support, 6)) return res;  // valid stays false
+    res.correspondences = s.count;
+    res.support = s.support;
+    res.residual_rms = std::sqrt(s.sum_sq / s.count);
+    const double sigma2 = std::max(sigma_floor2, s.sum_sq / s.count);
+    res.information = s.H / sigma2;
+    const Eigen::MatrixXd A = res.information + h_prior;
+    const Eigen::MatrixXd A_reg =
+        A + Eigen::MatrixXd::Identity(k, k) * (1e-12 * std::max(1.0, A.diagonal().maxCoeff()));
+    Eigen::LDLT<Eigen::MatrixXd> ldlt(A_reg);
+    const Eigen::VectorXd step = ldlt.solve(-(s.g / sigma2 + h_prior * y));
+    if (!step.allFinite()) return res;
+    y += step;
+    res.covariance = ldlt.solve(Eigen::MatrixXd::Identity(k, k));
+    if (step.norm() < 1e-5) {
+      res.converged = true;
+      break;
+    }
+  }
+  res.T_prev_curr = BoxPlus(T_init, D * y);
+  res.valid = res.T_prev_curr.matrix().allFinite() && res.covariance.allFinite();
+  return res;
+}
+
+namespace {
+
+/// Directions (indices into the columns of `dirs`) the pairs alone pin down: enough support and
+/// a marginal sigma below the configured limit.
+std::vector<int> DeterminedDirections(const MapAlignmentResult& a, const Eigen::MatrixXd& dirs,
+                                      const LocalMapConfig& config) {
+  std::vector<int> keep;
+  const int m = static_cast<int>(dirs.cols());
+  const Eigen::MatrixXd cov =
+      (a.information + Eigen::MatrixXd::Identity(m, m) * 1e-12).ldlt().solve(
+          Eigen::MatrixXd::Identity(m, m));
+  for (int i = 0; i < m; ++i) {
+    const double max_sigma =
+        IsTranslation(dirs.col(i)) ? config.max_translation_sigma : config.max_rotation_sigma;
+    if (a.support[i] >= config.min_support && std::isfinite(cov(i, i)) &&
+        std::sqrt(std::max(cov(i, i), 0.0)) < max_sigma) {
+      keep.push_back(i);
+    }
+  }
+  return keep;
+}
+
+Eigen::MatrixXd Columns(const Eigen::MatrixXd& D, const std::vector<int>& keep) {
+  Eigen::MatrixXd out(6, keep.size());
+  for (std::size_t i = 0; i < keep.size(); ++i) out.col(i) = D.col(keep[i]);
+  return out;
+}
+
+}  // namespace
+
+bool FillDegenerateFromLocalMap(const LocalVoxelMap& map, const Pose& T_world_prev,
+                                const std::vector<ShapedPoint>& source,
+                                const LocalMapConfig& config, RegistrationResult* result) {
+  const int k = static_cast<int>(result->degenerate_directions.size());
+  if (k == 0) return false;
+  Eigen::MatrixXd D(6, k);
+  for (int i = 0; i < k; ++i) D.col(i) = result->degenerate_directions[i];
+  const Pose T_planes = result->T_prev_curr;
+  MapAlignmentResult a = AlignToLocalMap(map, T_world_prev, source, T_planes, D,
+                                         D.transpose() * result->covariance * D, config);
+  if (!a.valid) return false;
+  const std::vector<int> keep = DeterminedDirections(a, D, config);
+  if (keep.empty()) return false;
+  Eigen::MatrixXd Dk = D;
+  if (static_cast<int>(keep.size()) < k) {
+    // Again along the determined directions only, so the others stay exactly at the prior.
+    Dk = Columns(D, keep);
+    a = AlignToLocalMap(map, T_world_prev, source, T_planes, Dk,
+                        Dk.transpose() * result->covariance * Dk, config);
+    if (!a.valid || DeterminedDirections(a, Dk, config).size() != keep.size()) return false;
+  }
+  // A correction the prior finds implausible is more likely a wrong convergence (a repetitive
+  // structure, too few pairs) than the motion.
+  const Eigen::VectorXd y = Dk.transpose() * BoxMinus(a.T_prev_curr, T_planes);
+  const Eigen::MatrixXd prior_y = Dk.transpose() * result->covariance * Dk;
+  if (!(y.dot(prior_y.ldlt().solve(y)) <= Chi2Quantile999(static_cast<double>(y.size())))) {
+    return false;
+  }
+  // Unchanged outside span(Dk) (the directions are orthonormal), the alignment's inside.
+  const Matrix6d Q = Matrix6d::Identity() - Dk * Dk.transpose();
+  Matrix6d cov = Q * result->covariance * Q + Dk * a.covariance * Dk.transpose();
+  cov = 0.5 * (cov + cov.transpose());
+  if (!cov.allFinite() || !a.T_prev_curr.matrix().allFinite()) return false;
+  result->T_prev_curr = a.T_prev_curr;
+  result->covariance = cov;
+  result->used_icp = true;
+  result->point_directions = static_cast<int>(keep.size());
+  result->prior_directions = k - static_cast<int>(keep.size());
+  for (int i : keep) result->prior_translations -= IsTranslation(D.col(i)) ? 1 : 0;
+  result->used_prior = result->prior_directions > 0;
+  return true;
+}
+
+std::string ConstraintSource(const RegistrationResult& result) {
+  std::string out;
+  auto add = [&](const char* part) { out += (out.empty() ? "" : "+") + std::string(part); };
+  if (result.degenerate_directions.size() < 6) add("planes");
+  if (result.point_directions > 0) add("points");
+  if (result.prior_directions > 0 || out.empty()) add("prior");
+  return out;
+}
+
+}  // namespace planeslam::registration

@@ -1,0 +1,174 @@
+// Alignment of a scan's structure to the local voxel map along the directions the planes leave
+// open: a corridor and a single wall with random clutter, moved along the open directions.
+#include "planeslam/registration/local_map.hpp"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "registration/corridor_scene.hpp"
+
+namespace planeslam::registration {
+namespace {
+
+using test::AddBox;
+using test::CorridorPlanesInCamera;
+using test::LookAlongX;
+using test::MakeCorridor;
+using test::RayCast;
+using test::SmallCamera;
+
+/// `boxes` random boxes (0.1 to 0.5 m a side) against the corridor's walls, floor or ceiling,
+/// between 1.5 and 7 m ahead.
+void AddClutter(int boxes, std::mt19937& rng, datasets::SyntheticScene* scene) {
+  std::uniform_real_distribution<double> along(1.5, 7.0), size(0.1, 0.5), side(0.0, 1.0);
+  for (int i = 0; i < boxes; ++i) {
+    const double x = along(rng), sx = size(rng), sy = size(rng), sz = size(rng);
+    Eigen::Vector3d lo, hi;
+    if (side(rng) < 0.5) {  // against a wall
+      const bool left = side(rng) < 0.5;
+      const double z = -1.2 + side(rng) * (2.5 - sz);
+      lo << x, left ? 1.0 - sy : -1.0, z;
+      hi << x + sx, left ? 1.0 : -1.0 + sy, z + sz;
+    } else {  // on the floor
+      const double y = -1.0 + side(rng) * (2.0 - sy);
+      lo << x, y, -1.2;
+      hi << x + sx, y + sy, -1.2 + sz;
+    }
+    AddBox(lo, hi, *scene);
+  }
+}
+
+/// Planes of the corridor registered between two views: the axis is left open.
+RegistrationResult CorridorRegistration(const test::CorridorScene& scene, const Pose& T_world_prev,
+                                        const Pose& T_world_curr, const MotionPrior& prior) {
+  const auto prev = CorridorPlanesInCamera(scene, T_world_prev);
+  const auto curr = CorridorPlanesInCamera(scene, T_world_curr);
+  std::vector<PlaneMatch> matches;
+  for (int i = 0; i < 4; ++i) matches.push_back({i, i, false});
+  return RegisterPlanes(prev, curr, matches, prior);
+}
+
+TEST(LocalMap, RecoversCorridorAxisFromClutterOverRandomDraws) {
+  std::mt19937 rng(33);
+  const datasets::PinholeIntrinsics k = SmallCamera();
+  std::uniform_real_distribution<double> step(0.05, 0.3), prior_error(-0.03, 0.03), small(-1, 1);
+  int failures = 0;
+  const int draws = 20;
+  for (int draw = 0; draw < draws; ++draw) {
+    test::CorridorScene scene = MakeCorridor(false);
+    AddClutter(6, rng, &scene.scene);
+    Pose T_world_prev = Pose::Identity();
+    T_world_prev.linear() = LookAlongX() * ExpSO3(0.02 * Eigen::Vector3d(small(rng), small(rng),
+                                                                           small(rng)));
+    T_world_prev.translation() << 0.0, 0.2 * small(rng), 0.1 * small(rng);
+    Pose T_prev_curr = Pose::Identity();
+    T_prev_curr.linear() = ExpSO3(0.01 * Eigen::Vector3d(small(rng), small(rng), small(rng)));
+    const Eigen::Vector3d axis = T_world_prev.linear().transpose() * Eigen::Vector3d::UnitX();
+    T_prev_curr.translation() = step(rng) * axis + Eigen::Vector3d(0.02, -0.02, 0.0);
+    const Pose T_world_curr = T_world_prev * T_prev_curr;
+    const datasets::OrganizedCloud prev = RayCast(scene, k, T_world_prev, 0.002, rng);
+    const datasets::OrganizedCloud curr = RayCast(scene, k, T_world_curr, 0.002, rng);
+
+    MotionPrior prior;
+    prior.T_prev_curr = T_prev_curr;
+    prior.T_prev_curr.translation() += prior_error(rng) * axis;
+    prior.covariance = (Vector6d() << 0.1, 0.1, 0.1, 0.05, 0.05, 0.05)
+                           .finished().array().square().matrix().asDiagonal();
+    RegistrationResult reg = CorridorRegistration(scene, T_world_prev, T_world_curr, prior);
+    ASSERT_TRUE(reg.degenerate);
+
+    LocalMapConfig config;
+    const double voxel = ScanReach(prev) / 100.0;
+    LocalVoxelMap map(voxel, config.max_points_per_voxel);
+    map.Insert(ShapePoints(VoxelDownsample(StructurePoints(prev, nullptr), 0.5 * voxel), voxel),
+               T_world_prev, ScanReach(prev));
+    const auto source =
+        ShapePoints(VoxelDownsample(StructurePoints(curr, nullptr), 0.5 * voxel), voxel);
+    const bool used = FillDegenerateFromLocalMap(map, T_world_prev, source, config, &reg);
+    const double error =
+        (reg.T_prev_curr.translation() - T_prev_curr.translation()).dot(axis);
+    if (!used || std::abs(error) > 0.003) ++failures;
+  }
+  EXPECT_LE(failures, 1) << "of " << draws << " draws";  // budget: one draw in twenty
+}
+
+// A second, independent scene: a rotating scanner (spherical range image) beside a single wall
+// over the ground, random boxes on the ground and against the wall. Ground and wall leave the
+// motion along the wall open; the boxes' points (the scanner's labels say which pixels are the
+// ground and the wall) must recover it against the map of the previous scan.
+TEST(LocalMap, RecoversMotionAlongASingleWallFromALidarScan) {
+  std::mt19937 rng(34);
+  std::uniform_real_distribution<double> step(0.3, 1.0), prior_error(-0.1, 0.1), unit(0.0, 1.0);
+  datasets::SphericalSimConfig lidar;
+  lidar.azimuth_resolution_deg = 0.4;
+  lidar.elevation_min_deg = -25.0;
+  lidar.elevation_max_deg = 5.0;
+  lidar.elevation_resolution_deg = 0.5;
+  lidar.max_range = 40.0;
+  lidar.range_sigma = 0.02;
+  int failures = 0;
+  const int draws = 8;
+  for (int draw = 0; draw < draws; ++draw) {
+    // Ground z = 0, wall y = 4; the scanner 1.7 m up, driving along +x.
+    std::vector<planeslam::test::GtPlane> big = {{Eigen::Vector3d::UnitZ(), 0.0},
+                                                 {-Eigen::Vector3d::UnitY(), -4.0}};
+    datasets::SyntheticScene scene = planeslam::test::SceneOf(big);
+    for (int i = 0; i < 12; ++i) {
+      const double x = -20.0 + 40.0 * unit(rng), size = 0.3 + 0.7 * unit(rng);
+      const bool on_wall = unit(rng) < 0.5;
+      const double y = on_wall ? 4.0 - size : -6.0 + 8.0 * unit(rng);
+      AddBox({x, y, 0.0}, {x + size, y + size, size * (1.0 + unit(rng))}, scene);
+    }
+    Pose T_world_prev = Pose::Identity();
+    T_world_prev.translation() << 0.0, 0.0, 1.7;
+    Pose T_prev_curr = Pose::Identity();
+    T_prev_curr.translation() << step(rng), 0.05 * (unit(rng) - 0.5), 0.0;
+    T_prev_curr.linear() = ExpSO3(Eigen::Vector3d(0.0, 0.0, 0.02 * (unit(rng) - 0.5)));
+    const Pose T_world_curr = T_world_prev * T_prev_curr;
+    const auto sensor = datasets::MakeSphericalSensor(scene, lidar);
+    const datasets::SyntheticRender prev = sensor->Render(T_world_prev, 2 * draw + 1);
+    const datasets::SyntheticRender curr = sensor->Render(T_world_curr, 2 * draw + 2);
+    // Labels: the ground and the wall (scene planes 1 and 2) are "planes", the rest structure.
+    auto labels_of = [](const datasets::SyntheticRender& r) {
+      std::vector<std::int32_t> labels(r.cloud.points.size(), -1);
+      for (std::size_t i = 0; i < labels.size(); ++i) {
+        const int id = r.labels.data[i];
+        if (id == 1 || id == 2) labels[i] = id;
+      }
+      return labels;
+    };
+    const std::vector<std::int32_t> prev_labels = labels_of(prev), curr_labels = labels_of(curr);
+
+    std::vector<detection::Plane> prev_planes, curr_planes;
+    for (const auto& g : big) {
+      for (auto [T, out] : {std::pair{T_world_prev, &prev_planes}, {T_world_curr, &curr_planes}}) {
+        out->push_back(test::MakePlane(T.linear().transpose() * g.normal,
+                                 g.d - g.normal.dot(T.translation())));
+      }
+    }
+    MotionPrior prior;
+    prior.T_prev_curr = T_prev_curr;
+    prior.T_prev_curr.translation().x() += prior_error(rng);
+    prior.covariance = (Vector6d() << 0.3, 0.3, 0.3, 0.05, 0.05, 0.05)
+                           .finished().array().square().matrix().asDiagonal();
+    RegistrationResult reg =
+        RegisterPlanes(prev_planes, curr_planes, {{0, 0, false}, {1, 1, false}}, prior);
+    ASSERT_TRUE(reg.degenerate);
+    ASSERT_EQ(ConstraintSource(reg), "planes+prior");
+
+    const double voxel = ScanReach(prev.cloud) / 100.0;
+    LocalVoxelMap map(voxel, LocalMapConfig().max_points_per_voxel);
+    map.Insert(ScanStructure(prev.cloud, &prev_labels, voxel), T_world_prev,
+               ScanReach(prev.cloud));
+    const bool used = FillDegenerateFromLocalMap(
+        map, T_world_prev, ScanStructure(curr.cloud, &curr_labels, voxel), {}, &reg);
+    const double error = (reg.T_prev_curr.translation() - T_prev_curr.translation()).x();
+    if (!used || reg.prior_translations > 0 || std::abs(error) > 0.03) ++failures;
+    if (used) EXPECT_EQ(ConstraintSource(reg), "planes+points");
+  }
+  EXPECT_LE(failures, 1) << "of " << draws << " draws";  // budget: one draw in eight
+}
+
+}  // namespace
+}  // namespace planeslam::registration
