@@ -18,11 +18,11 @@ if [ ! -d "$here/../../web/node_modules/playwright-core" ]; then
 fi
 rm -rf "$work"
 mkdir -p "$work"
-if "$bin" report "$work" 2>&1 | grep -q "built without web/node_modules"; then
+"$bin" run --quiet -o "$work/run" --set run.frame_stride=3 --set run.max_frames=125 \
+  --set octomap.enabled=false > "$work/run.log" 2> "$work/run.err"
+if grep -q "built without web/node_modules" "$work/run.err"; then
   echo "SKIP: planeslam was built without the report page (web/node_modules absent at configure)"; exit 77
 fi
-"$bin" run --quiet -o "$work/run" --set run.frame_stride=3 --set run.max_frames=125 \
-  --set octomap.enabled=false > "$work/run.log"
 "$bin" simulate room --quiet --frames 1 -o "$work/sim" > /dev/null
 "$bin" detect "$(ls "$work"/sim/depth/*.png | head -1)" --quiet -o "$work/detect"
 node "$here/report_browser_test.mjs" --run "$work/run" --detect "$work/detect"
