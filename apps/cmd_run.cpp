@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <exception>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -20,6 +21,7 @@
 #include "config_sections_synthetic.hpp"
 #include "detector_factory.hpp"
 #include "interrupt.hpp"
+#include "pipeline.hpp"
 #include "run_session.hpp"
 #include "planeslam/datasets/sequence_factory.hpp"
 #include "sensor_profiles.hpp"
@@ -67,42 +69,104 @@ std::vector<std::size_t> FrameIndices(const RunInput& input, const RunConfig& ru
   return indices;
 }
 
-/// Loads frame `index`; a frame the sequence cannot read is recorded in the session (frames.csv row,
-/// warning) and yields nothing. The first frame of the run has nothing to fall back on, so its
-/// error propagates and nothing is written.
-std::optional<ds::Frame> LoadOrRecordBad(const RunInput& input, std::size_t index, bool first,
-                                         const RunConfig& run, RunSession& session) {
-  try {
-    return input.sequence->Load(index);
-  } catch (const IoError& e) {
-    if (first) throw;
-    BadFrame bad{index, input.sequence->Timestamp(index), e.file(), e.what()};
-    const bool stop = run.on_bad_frame == "stop";
-    std::cerr << (::isatty(STDERR_FILENO) ? "\n" : "")
-              << "planeslam run: " << (stop ? "error" : "warning") << ": frame " << index
-              << (stop ? " stops the run" : " skipped") << ": " << bad.error << "\n";
-    session.RecordBadFrame(std::move(bad), stop);
-    return std::nullopt;
-  }
+/// Records frame `index`, which the sequence could not read (`error`), in the session (frames.csv
+/// row, warning). The first frame of the run has nothing to fall back on, so its error
+/// propagates and nothing is written.
+void RecordBad(const RunInput& input, std::size_t index, bool first, const RunConfig& run,
+               RunSession& session, const IoError& error) {
+  if (first) throw error;
+  BadFrame bad{index, input.sequence->Timestamp(index), error.file(), error.what()};
+  const bool stop = run.on_bad_frame == "stop";
+  std::cerr << (::isatty(STDERR_FILENO) ? "\n" : "")
+            << "planeslam run: " << (stop ? "error" : "warning") << ": frame " << index
+            << (stop ? " stops the run" : " skipped") << ": " << bad.error << "\n";
+  session.RecordBadFrame(std::move(bad), stop);
 }
 
-/// Loads each frame of `indices` and hands it to the session until done or interrupted.
-void ProcessFrames(const RunInput& input, const std::vector<std::size_t>& indices, bool quiet,
-                   RunSession& session) {
+/// Loads each frame of `indices` and hands it to the session until done or interrupted, all on
+/// this thread.
+void ProcessFramesInline(const RunInput& input, const std::vector<std::size_t>& indices,
+                         ProgressBar& progress, RunSession& session) {
   const RunConfig& run = session.run_config();
-  ProgressBar progress("run", indices.size(), quiet);
   for (std::size_t i : indices) {
     if (StopRequested()) {
       session.SetInterrupted();
       break;
     }
     const auto t = Clock::now();
-    std::optional<ds::Frame> loaded = LoadOrRecordBad(input, i, i == indices.front(), run, session);
+    std::optional<ds::Frame> loaded;
+    try {
+      loaded = input.sequence->Load(i);
+    } catch (const IoError& e) {
+      RecordBad(input, i, i == indices.front(), run, session, e);
+    }
     session.AddLoadTime(MsSince(t));
     if (session.stopped_at_bad_frame()) break;
     if (!loaded) continue;
     session.Track(i, *loaded);
     progress.Update(session.frames_done());
+  }
+}
+
+/// A frame read and detected ahead by a worker, or the reader's error.
+struct FrameAhead {
+  std::optional<PreparedFrame> prepared;
+  std::exception_ptr load_error;  ///< an IoError from the sequence
+  double load_ms = 0.0;
+};
+
+/// As ProcessFramesInline, with `workers` threads reading and detecting frames ahead (each with
+/// its own detector; reading and detection depend on the frame alone) while this thread tracks
+/// them in order. At most two frames per worker are held ahead.
+void ProcessFramesAhead(const RunInput& input, const std::vector<std::size_t>& indices,
+                        std::size_t workers, ProgressBar& progress, RunSession& session) {
+  const RunConfig& run = session.run_config();
+  std::vector<std::unique_ptr<detection::PlaneDetector>> detectors;
+  for (std::size_t w = 0; w < workers; ++w) detectors.push_back(session.MakeWorkerDetector());
+  auto produce = [&](std::size_t k, std::size_t worker) {
+    FrameAhead ahead;
+    const auto t = Clock::now();
+    std::optional<ds::Frame> frame;
+    try {
+      frame = input.sequence->Load(indices[k]);
+    } catch (const IoError&) {
+      ahead.load_error = std::current_exception();
+    }
+    ahead.load_ms = MsSince(t);
+    if (frame) ahead.prepared = session.Prepare(std::move(*frame), *detectors[worker]);
+    return ahead;
+  };
+  OrderedPipeline<FrameAhead> pipeline(indices.size(), workers, 2 * workers, produce);
+  for (std::size_t k = 0; k < indices.size(); ++k) {
+    if (StopRequested()) {
+      session.SetInterrupted();
+      break;
+    }
+    FrameAhead ahead = pipeline.Take();
+    session.AddLoadTime(ahead.load_ms);
+    if (ahead.load_error) {
+      try {
+        std::rethrow_exception(ahead.load_error);
+      } catch (const IoError& e) {
+        RecordBad(input, indices[k], k == 0, run, session, e);
+      }
+    }
+    if (session.stopped_at_bad_frame()) break;
+    if (!ahead.prepared) continue;
+    session.TrackPrepared(indices[k], *ahead.prepared);
+    progress.Update(session.frames_done());
+  }
+}
+
+/// Runs the frames inline on one thread, or ahead on session.threads() workers.
+void ProcessFrames(const RunInput& input, const std::vector<std::size_t>& indices, bool quiet,
+                   RunSession& session) {
+  ProgressBar progress("run", indices.size(), quiet);
+  const std::size_t threads = session.threads();
+  if (threads <= 1 || indices.size() <= 1) {
+    ProcessFramesInline(input, indices, progress, session);
+  } else {
+    ProcessFramesAhead(input, indices, threads, progress, session);
   }
   progress.Finish();
 }
@@ -124,6 +188,10 @@ class RunCommand : public Command {
     sub.add_option("--scene", scene_,
                    "synthetic scene when no SEQUENCE: room, corridor, rubble, street, ring");
     sub.add_option("--method", method_, "plane detector (default: detection.method)");
+    sub.add_option("--threads", threads_,
+                   "threads (as run.threads; 0: the machine's cores); the outputs do not "
+                   "depend on it")
+        ->check(CLI::Range(0, 256));
     sub.add_flag("--no-report", no_report_, "do not write report.html (as report.enabled: false)");
     AddSensorOption(sub, sensor_);
     AddConfigOptions(sub, options_);
@@ -151,6 +219,7 @@ class RunCommand : public Command {
 
   int Run() override {
     Config config = LoadConfigWithProfile(options_, sensor_, sequence_, "run");
+    if (threads_) config.Get<RunConfig>("run").threads = *threads_;
     if (MaybePrintConfig(options_, config)) return 0;
     if (no_report_) config.Get<ReportConfig>("report").enabled = false;
     ApplyInputLimits(config);
@@ -189,6 +258,7 @@ class RunCommand : public Command {
   std::string method_;
   std::string sensor_;
   bool no_report_ = false;
+  std::optional<int> threads_;
   ConfigOptions options_;
 };
 

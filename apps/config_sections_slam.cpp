@@ -102,6 +102,10 @@ void VisitRun(FieldVisitor& v, RunConfig& c) {
           "a frame that cannot be read (corrupt, truncated or missing file): skip = warn, leave it "
           "out and carry on (exit 5); stop = end the run there, keeping the frames done (exit 6)",
           {"skip", "stop"});
+  v.Field("threads", c.threads,
+          "threads reading and detecting frames ahead and writing outputs in parallel; "
+          "0 = the machine's cores; the outputs do not depend on it",
+          0, 256);
 }
 
 PLANESLAM_REGISTER_CONFIG_SECTION(mapping::SlamConfig, "slam",

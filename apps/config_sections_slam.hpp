@@ -20,6 +20,9 @@ struct RunConfig {
   /// A frame that cannot be read: "skip" leaves it out and carries on, "stop" ends the run there;
   /// both write the outputs of the frames done.
   std::string on_bad_frame = "skip";
+  /// Threads of `planeslam run` (reading and detecting ahead, output files); 0 = the machine's
+  /// cores. The outputs do not depend on it.
+  int threads = 0;
 };
 
 /// The SLAM system configured from `config`'s sections slam, association, registration,

@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <future>
 #include <iostream>
+#include <unordered_map>
 #include <nlohmann/json.hpp>
 
 #include "cli_common.hpp"
@@ -12,6 +14,7 @@
 #include "detector_factory.hpp"
 #include "exit_codes.hpp"
 #include "kitti_report.hpp"
+#include "pipeline.hpp"
 #include "planeslam/datasets/atomic_file.hpp"
 #include "planeslam/datasets/trajectory_eval.hpp"
 #include "planeslam/datasets/trajectory_io.hpp"
@@ -63,12 +66,11 @@ void WriteMapOutputs(const std::string& out_dir, const mapping::SlamSystem& slam
 /// The keyframes' thinned clouds inserted at their optimised poses, written as octomap.bt.
 void WriteOctomap(
     const std::string& out_dir, const mapping::OccupancyMapConfig& config,
-    const mapping::SlamSystem& slam,
+    const std::unordered_map<std::int64_t, Pose>& poses,
     const std::vector<std::pair<std::int64_t, std::vector<Eigen::Vector3f>>>& keyframe_clouds) {
   mapping::OccupancyMapConfig thinned = config;
   thinned.downsample_voxel = 0.0;  // already thinned per keyframe
   mapping::OccupancyMapBuilder octomap(thinned);
-  const auto poses = slam.KeyframePoses();
   for (const auto& [id, points] : keyframe_clouds) octomap.Insert(points, poses.at(id));
   octomap.Write(out_dir + "/octomap.bt");
 }
@@ -126,7 +128,7 @@ nlohmann::json BadFramesJson(const std::vector<BadFrame>& bad_frames) {
 }  // namespace
 
 RunSession::RunSession(Config config, const std::string& method, std::string input_name)
-    : config_(std::move(config)), input_name_(std::move(input_name)) {
+    : config_(std::move(config)), input_name_(std::move(input_name)), method_(method) {
   detector_ = MakeDetector(method, config_, run_config().decimation);
   slam_ = MakeSlamSystem(config_);
   const auto& octomap = config_.Get<mapping::OccupancyMapConfig>("octomap");
@@ -149,14 +151,35 @@ void RunSession::SetInitialPose(const Pose& T_world_first) {
   slam_->SetInitialPose(T_world_first);
 }
 
-mapping::SlamFrameResult RunSession::Track(std::size_t index, ds::Frame& frame) {
-  const RunConfig& run = run_config();
+std::size_t RunSession::threads() const { return ResolveThreads(run_config().threads); }
+
+std::unique_ptr<detection::PlaneDetector> RunSession::MakeWorkerDetector() const {
+  return MakeDetector(method_, config_, run_config().decimation);
+}
+
+PreparedFrame RunSession::Prepare(ds::Frame frame, const detection::PlaneDetector& detector) const {
+  const int decimation = run_config().decimation;
   const auto t = Clock::now();
-  if (run.decimation > 1) frame.cloud = ds::Decimate(frame.cloud, run.decimation);
-  const detection::Segmentation segmentation = detector_->Detect(frame.cloud);
-  time_detect_ += MsSince(t);
+  PreparedFrame prepared;
+  if (decimation > 1) frame.cloud = ds::Decimate(frame.cloud, decimation);
+  prepared.segmentation = detector.Detect(frame.cloud);
+  prepared.detect_ms = MsSince(t);
+  prepared.frame = std::move(frame);
+  return prepared;
+}
+
+mapping::SlamFrameResult RunSession::Track(std::size_t index, ds::Frame& frame) {
+  PreparedFrame prepared = Prepare(std::move(frame), *detector_);
+  const mapping::SlamFrameResult result = TrackPrepared(index, prepared);
+  frame = std::move(prepared.frame);
+  return result;
+}
+
+mapping::SlamFrameResult RunSession::TrackPrepared(std::size_t index, PreparedFrame& prepared) {
+  const ds::Frame& frame = prepared.frame;
+  time_detect_ += prepared.detect_ms;
   const mapping::SlamFrameResult result =
-      slam_->ProcessFrame(frame.timestamp, frame.cloud, segmentation);
+      slam_->ProcessFrame(frame.timestamp, frame.cloud, prepared.segmentation);
   if (frame.T_world_sensor_gt) ground_truth_.Add(frame.timestamp, *frame.T_world_sensor_gt);
   LogFrame(index, frame.timestamp, result, frame_log_);
   if (keep_keyframe_clouds_ && result.keyframe) {
@@ -190,14 +213,20 @@ std::string RunSession::Write(const std::string& out_dir) {
   const auto t = Clock::now();
   EnsureDirectory(out_dir);
   const ds::Trajectory estimate = slam_->EstimatedTrajectory();
+  // The OctoMap (ray casting every keyframe: the longest output) is built on its own thread from
+  // copies of the poses while this one writes the rest; it reads nothing else that changes.
+  std::future<void> octomap;
+  if (want_octomap_) {
+    auto job = [this, out_dir, poses = slam_->KeyframePoses(),
+                octomap_config = config_.Get<mapping::OccupancyMapConfig>("octomap")] {
+      WriteOctomap(out_dir, octomap_config, poses, keyframe_clouds_);
+    };
+    octomap = std::async(threads() > 1 ? std::launch::async : std::launch::deferred, job);
+  }
   WriteMapOutputs(out_dir, *slam_, estimate, config_, frame_log_.str());
   WriteClosuresCsv(out_dir + "/closures.csv", *slam_, ground_truth_);
   if (!ground_truth_.empty()) {
     ds::WriteTumTrajectory(out_dir + "/ground_truth_tum.txt", ground_truth_);
-  }
-  if (want_octomap_) {
-    WriteOctomap(out_dir, config_.Get<mapping::OccupancyMapConfig>("octomap"), *slam_,
-                 keyframe_clouds_);
   }
   nlohmann::json metrics;
   std::string ate_line = "no ground truth";
@@ -208,6 +237,7 @@ std::string RunSession::Write(const std::string& out_dir) {
       AddKittiErrors(input_name_, ground_truth_, estimate, &metrics, &ate_line);
     }
   }
+  if (octomap.valid()) octomap.get();
   write_ms_ = MsSince(t);
   const mapping::SlamStats& stats = slam_->stats();
   nlohmann::json summary = {

@@ -30,6 +30,14 @@ struct BadFrame {
   std::string error;       ///< the reader's message, "FILE: reason"
 };
 
+/// A frame decimated (run.decimation) and segmented, ready to be tracked. Preparing is pure (it
+/// depends on the frame alone), so `planeslam run` prepares frames ahead on worker threads.
+struct PreparedFrame {
+  datasets::Frame frame;
+  detection::Segmentation segmentation;
+  double detect_ms = 0.0;  ///< [ms] decimation and detection
+};
+
 class RunSession {
  public:
   /// `config`: the effective configuration (profile, files, overrides applied); `method`: the
@@ -54,6 +62,16 @@ class RunSession {
   /// its ground-truth pose for the scores and, for a keyframe, its thinned cloud for the OctoMap.
   /// `index` is the frame's position in its sequence (frames.csv).
   mapping::SlamFrameResult Track(std::size_t index, datasets::Frame& frame);
+  /// Track's first half: decimation and detection with `detector` (the session's, or one from
+  /// MakeWorkerDetector for another thread). Reads only the configuration: safe to call from
+  /// several threads at once, each with its own detector.
+  PreparedFrame Prepare(datasets::Frame frame, const detection::PlaneDetector& detector) const;
+  /// A detector configured as the session's, for a worker thread.
+  std::unique_ptr<detection::PlaneDetector> MakeWorkerDetector() const;
+  /// Track's second half, in frame order: tracking, mapping and the records.
+  mapping::SlamFrameResult TrackPrepared(std::size_t index, PreparedFrame& prepared);
+  /// Threads of the run (run.threads; 0 there = the machine's cores).
+  std::size_t threads() const;
   /// A frame that could not be read: a frames.csv row and a summary.json entry; `stop` when it
   /// ended the run.
   void RecordBadFrame(BadFrame bad, bool stop);
@@ -86,6 +104,7 @@ class RunSession {
  private:
   Config config_;
   std::string input_name_;
+  std::string method_;
   std::unique_ptr<detection::PlaneDetector> detector_;
   std::unique_ptr<mapping::SlamSystem> slam_;
   bool want_octomap_ = false;
