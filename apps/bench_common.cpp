@@ -6,10 +6,13 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <limits>
+#include <memory>
 #include <sstream>
 
 #include "detector_factory.hpp"
+#include "pipeline.hpp"
 #include "planeslam/datasets/errors.hpp"
 #include "planeslam/datasets/file_sequence.hpp"
 #include "planeslam/datasets/sequence.hpp"
@@ -34,14 +37,26 @@ std::string Padded(std::size_t index) {
   return buffer;
 }
 
+/// Frames to load, in order: each job reads one frame. Reading is independent per frame, so the
+/// jobs run on the machine's cores; the result keeps their order.
+using FrameJobs = std::vector<std::function<BenchFrame()>>;
+
+std::vector<BenchFrame> RunJobs(const FrameJobs& jobs) {
+  std::vector<BenchFrame> frames(jobs.size());
+  ParallelFor(jobs.size(), ResolveThreads(0), [&](std::size_t i) { frames[i] = jobs[i](); });
+  return frames;
+}
+
 void AddSequenceFrames(const std::string& folder, const datasets::SensorConfig& sensor,
-                       int stride, std::vector<BenchFrame>* frames) {
-  const auto sequence = datasets::OpenSequence(folder, sensor);
+                       int stride, FrameJobs* jobs) {
+  std::shared_ptr<const datasets::Sequence> sequence = datasets::OpenSequence(folder, sensor);
   const std::string name = fs::path(folder).filename().empty()
                                ? fs::path(folder).parent_path().filename().string()
                                : fs::path(folder).filename().string();
   for (std::size_t i = 0; i < sequence->Size(); i += static_cast<std::size_t>(stride)) {
-    frames->push_back({name + "/" + Padded(i), sequence->Load(i).cloud});
+    jobs->push_back([sequence, i, name] {
+      return BenchFrame{name + "/" + Padded(i), sequence->Load(i).cloud};
+    });
   }
 }
 
@@ -50,11 +65,11 @@ void AddSequenceFrames(const std::string& folder, const datasets::SensorConfig& 
 std::vector<BenchFrame> LoadDefaultFrames(const std::string& data_dir,
                                           const datasets::SensorConfig& sensor,
                                           std::vector<std::string>* skipped) {
-  std::vector<BenchFrame> frames;
+  FrameJobs jobs;
   const fs::path root(data_dir);
   const fs::path tum = root / "tum_fr3_structure_notexture_far";
   if (fs::is_directory(tum)) {
-    AddSequenceFrames(tum.string(), sensor, 50, &frames);
+    AddSequenceFrames(tum.string(), sensor, 50, &jobs);
   } else if (skipped) {
     skipped->push_back(tum.string());
   }
@@ -80,7 +95,9 @@ std::vector<BenchFrame> LoadDefaultFrames(const std::string& data_dir,
       if (skipped) skipped->push_back(file.string());
       continue;
     }
-    frames.push_back({file.stem().string(), datasets::ReadOrganizedPcd(file.string(), kinect)});
+    jobs.push_back([file, kinect] {
+      return BenchFrame{file.stem().string(), datasets::ReadOrganizedPcd(file.string(), kinect)};
+    });
   }
   // Terrestrial laser scans: coordinates in centimetres, rows = elevation, columns = azimuth.
   datasets::SensorConfig laser;
@@ -92,25 +109,29 @@ std::vector<BenchFrame> LoadDefaultFrames(const std::string& data_dir,
       if (skipped) skipped->push_back(file.string());
       continue;
     }
-    frames.push_back({"laser_" + file.stem().string(),
-                      datasets::ReadOrganizedPcd(file.string(), laser)});
+    jobs.push_back([file, laser] {
+      return BenchFrame{"laser_" + file.stem().string(),
+                        datasets::ReadOrganizedPcd(file.string(), laser)};
+    });
   }
-  return frames;
+  return RunJobs(jobs);
 }
 
 std::vector<BenchFrame> LoadFrames(const std::vector<std::string>& paths,
                                    const datasets::SensorConfig& sensor, int stride) {
   PLANESLAM_CHECK(stride >= 1, "stride " << stride);
-  std::vector<BenchFrame> frames;
+  FrameJobs jobs;
   for (const std::string& path : paths) {
     if (fs::is_directory(path)) {
-      AddSequenceFrames(path, sensor, stride, &frames);
+      AddSequenceFrames(path, sensor, stride, &jobs);
     } else {
-      frames.push_back({fs::path(path).stem().string(),
-                        datasets::LoadSingleFrame(path, sensor).cloud});
+      jobs.push_back([path, sensor] {
+        return BenchFrame{fs::path(path).stem().string(),
+                          datasets::LoadSingleFrame(path, sensor).cloud};
+      });
     }
   }
-  return frames;
+  return RunJobs(jobs);
 }
 
 std::string OmpsSettings::Describe() const {

@@ -26,13 +26,15 @@ struct BenchFrame {
 /// The default frame set under `data_dir`: every 50th frame of tum_fr3_structure_notexture_far,
 /// organized_pcd/office1, table_scene_mug_stereo_textured and the three frame_*.pcd (Kinect),
 /// and the three laser scans (centimetres, spherical grid). Missing files are skipped and named in
-/// `skipped`. `sensor` supplies depth intrinsics and range limits.
+/// `skipped`. `sensor` supplies depth intrinsics and range limits. Frames are read on the
+/// machine's cores, in the order above.
 std::vector<BenchFrame> LoadDefaultFrames(const std::string& data_dir,
                                           const datasets::SensorConfig& sensor,
                                           std::vector<std::string>* skipped);
 
 /// Frames from the command line: a file is one frame (LoadSingleFrame); a folder is a sequence of
-/// which every `stride`-th frame is used. Throws IoError for unreadable input.
+/// which every `stride`-th frame is used, read on the machine's cores. Throws IoError for
+/// unreadable input (the first unreadable frame in order).
 std::vector<BenchFrame> LoadFrames(const std::vector<std::string>& paths,
                                    const datasets::SensorConfig& sensor, int stride);
 

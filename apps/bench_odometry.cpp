@@ -20,6 +20,7 @@
 #include "detector_factory.hpp"
 #include "interrupt.hpp"
 #include "kitti_report.hpp"
+#include "pipeline.hpp"
 #include "planeslam/datasets/atomic_file.hpp"
 #include "planeslam/datasets/errors.hpp"
 #include "planeslam/datasets/sensor_config.hpp"
@@ -197,9 +198,12 @@ bool TrackSequence(const ds::Sequence& sequence, std::size_t n, const PlaneMetho
 #endif
 
   ProgressBar progress("bench odometry", n, options.quiet);
+  // The next frames are read on another thread while this one times the methods, one at a time.
+  OrderedPipeline<ds::Frame> reader(n, 1, 2,
+                                    [&](std::size_t k, std::size_t) { return sequence.Load(k); });
   for (std::size_t i = 0; i < n; ++i) {
     if (StopRequested()) return false;
-    const ds::Frame frame = sequence.Load(i);
+    const ds::Frame frame = reader.Take();
     if (frame.T_world_sensor_gt) runs->ground_truth.Add(frame.timestamp, *frame.T_world_sensor_gt);
 
     const Pose T_world_prev = odometry.T_world_sensor();

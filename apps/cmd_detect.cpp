@@ -2,13 +2,17 @@
 #include <algorithm>
 #include <array>
 #include <cctype>
+#include <cstdarg>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <exception>
 #include <filesystem>
 #include <iostream>
 #include <limits>
+#include <map>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -17,6 +21,8 @@
 #include "command_registry.hpp"
 #include "config_sections_app.hpp"
 #include "detector_factory.hpp"
+#include "exit_codes.hpp"
+#include "pipeline.hpp"
 #include "planeslam/datasets/atomic_file.hpp"
 #include "planeslam/datasets/errors.hpp"
 #include "planeslam/datasets/image_io.hpp"
@@ -119,6 +125,16 @@ nlohmann::json PlanesJson(const std::string& input, const std::string& method,
   return j;
 }
 
+/// printf into `text`.
+__attribute__((format(printf, 2, 3))) void Appendf(std::string* text, const char* format, ...) {
+  char buffer[1024];
+  va_list args;
+  va_start(args, format);
+  const int n = std::vsnprintf(buffer, sizeof(buffer), format, args);
+  va_end(args);
+  if (n > 0) text->append(buffer, std::min<std::size_t>(static_cast<std::size_t>(n), sizeof(buffer) - 1));
+}
+
 bool IsPng(const std::string& path) {
   std::string ext = std::filesystem::path(path).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
@@ -155,9 +171,15 @@ class DetectCommand : public Command {
 
   void Setup(CLI::App& sub) override {
     // No CLI11 file checks: the readers throw IoError naming the file (one-line error, exit 2).
-    sub.add_option("input", input_, "16-bit depth PNG or organized .pcd (or KITTI .bin)")
+    sub.add_option("input", inputs_,
+                   "16-bit depth PNG or organized .pcd (or KITTI .bin); several: one folder each "
+                   "under --out, named by file stem, detected in parallel")
         ->required();
     sub.add_option("-o,--out", out_, "output folder (created)")->required();
+    sub.add_option("--threads", threads_,
+                   "threads for several inputs (0: the machine's cores); each input's timing is "
+                   "its own detection's")
+        ->check(CLI::Range(0, 256));
     std::string methods;
     for (const auto& m : DetectorMethods()) methods += (methods.empty() ? "" : "|") + m;
     sub.add_option("-m,--method", method_, "detector " + methods + " (default: detection.method)")
@@ -175,6 +197,7 @@ class DetectCommand : public Command {
         "config/detection_kinect.yaml --out det --method point\n"
         "  planeslam detect scan000.pcd --config config/laser_scan.yaml --config "
         "config/detection_laser.yaml --out det\n"
+        "  planeslam detect depth/*.png --config config/tum_fr3.yaml --out det   (det/<stem>/ each)\n"
         "Writes planes.json (n.p = d in the sensor frame, covariance of (n, d)), labels.png "
         "(16-bit "
         "plane id, 0 = none),\nlabels_color.png, classes.png (grid methods: planar green, "
@@ -183,15 +206,77 @@ class DetectCommand : public Command {
 
   int Run() override {
     ProfileChoice profile;
-    Config config = LoadConfigWithProfile(options_, sensor_, input_, "detect", &profile);
+    Config config = LoadConfigWithProfile(options_, sensor_, inputs_.front(), "detect", &profile);
     auto& section = config.Get<DetectionSection>("detection");
     if (!method_.empty()) section.method = method_;
     if (MaybePrintConfig(options_, config)) return 0;
+    MakeDetector(section.method, config);  // a configuration error ends the command here
+    if (inputs_.size() == 1) {
+      const DetectOutput output = DetectOne(config, profile, inputs_.front(), out_);
+      std::fputs(output.err.c_str(), stderr);
+      std::fputs(output.out.c_str(), stdout);
+      return 0;
+    }
+    // Several inputs: independent, so detected on several threads, reported in the given order;
+    // an unreadable one is reported and skipped (exit 5), all unreadable is an error.
+    const std::vector<std::string> names = OutputNames(inputs_);
+    std::vector<DetectOutput> outputs(inputs_.size());
+    std::vector<std::exception_ptr> errors(inputs_.size());
+    ParallelFor(inputs_.size(), ResolveThreads(threads_), [&](std::size_t i) {
+      try {
+        outputs[i] = DetectOne(config, profile, inputs_[i],
+                               (std::filesystem::path(out_) / names[i]).string());
+      } catch (const IoError&) {
+        errors[i] = std::current_exception();
+      }
+    });
+    std::size_t failed = 0;
+    for (std::size_t i = 0; i < inputs_.size(); ++i) {
+      if (errors[i]) {
+        if (++failed == inputs_.size()) std::rethrow_exception(errors.front());
+        try {
+          std::rethrow_exception(errors[i]);
+        } catch (const IoError& e) {
+          std::cerr << "planeslam detect: warning: skipped: " << e.what() << "\n";
+        }
+        continue;
+      }
+      std::fputs(outputs[i].err.c_str(), stderr);
+      std::fputs(outputs[i].out.c_str(), stdout);
+    }
+    return failed > 0 ? kExitSkippedFrames : kExitSuccess;
+  }
+
+ private:
+  /// What detecting one input printed: the report (stdout) and the notes (stderr).
+  struct DetectOutput {
+    std::string out, err;
+  };
+
+  /// The output folder name of each input: its file stem, with its position appended when
+  /// another input has the same stem.
+  static std::vector<std::string> OutputNames(const std::vector<std::string>& inputs) {
+    std::map<std::string, int> count;
+    for (const std::string& in : inputs) ++count[std::filesystem::path(in).stem().string()];
+    std::vector<std::string> names;
+    for (std::size_t i = 0; i < inputs.size(); ++i) {
+      const std::string stem = std::filesystem::path(inputs[i]).stem().string();
+      names.push_back(count[stem] > 1 ? stem + "_" + std::to_string(i + 1) : stem);
+    }
+    return names;
+  }
+
+  /// Detects the planes of `input` and writes its files into `out_dir`; reads only `config`, so
+  /// several inputs may be detected at once.
+  DetectOutput DetectOne(const Config& config, const ProfileChoice& profile,
+                         const std::string& input, const std::string& out_dir) const {
+    const auto& section = config.Get<DetectionSection>("detection");
+    DetectOutput output;
     ds::SensorConfig sensor = config.Get<ds::SensorConfig>("sensor");
-    if (IsPng(input_)) {
-      const std::string source = ResolveDepthCamera(input_, intrinsics_, profile, &sensor);
+    if (IsPng(input)) {
+      const std::string source = ResolveDepthCamera(input, intrinsics_, profile, &sensor);
       const ds::PinholeIntrinsics k = sensor.EffectiveIntrinsics();
-      std::fprintf(stderr,
+      Appendf(&output.err,
                    "planeslam detect: intrinsics fx %g fy %g cx %g cy %g, depth_scale %g, from "
                    "%s\n",
                    k.fx, k.fy, k.cx, k.cy, sensor.depth_scale, source.c_str());
@@ -199,15 +284,19 @@ class DetectCommand : public Command {
     const auto detector = MakeDetector(section.method, config);
 
     const auto t0 = Clock::now();
-    const ds::Frame frame = ds::LoadSingleFrame(input_, sensor);
+    const ds::Frame frame = ds::LoadSingleFrame(input, sensor);
     // A frame without a single measurement is a broken input for `detect` (the detectors
     // themselves return no planes for it, as `run` needs on a dropped frame).
     if (frame.cloud.CountValid() == 0) {
-      throw IoError(input_, "no valid points (every pixel is invalid or out of range)");
+      throw IoError(input, "no valid points (every pixel is invalid or out of range)");
     }
+    // Detections run one at a time (reading and writing of other inputs go on beside), so each
+    // input's detect time is that of its detection alone.
+    std::unique_lock<std::mutex> timing(detect_mutex_);
     const auto t1 = Clock::now();
     const detection::Segmentation seg = detector->Detect(frame.cloud);
     const auto t2 = Clock::now();
+    timing.unlock();
     const ds::OrganizedCloud& cloud = frame.cloud;
 
     // Every output is built in memory first; only then are files written (each atomically).
@@ -251,12 +340,12 @@ class DetectCommand : public Command {
     }
     const double detect_ms = Ms(t1, t2);
     const std::string json =
-        PlanesJson(input_, detector->Name(), cloud, seg, valid, assigned, detect_ms).dump(1) + "\n";
+        PlanesJson(input, detector->Name(), cloud, seg, valid, assigned, detect_ms).dump(1) + "\n";
     const std::string ply = PlyBytes(cloud, seg, grey);
     const std::string config_yaml = config.ToYaml();
 
-    EnsureDirectory(out_);
-    const std::filesystem::path dir(out_);
+    EnsureDirectory(out_dir);
+    const std::filesystem::path dir(out_dir);
     ds::WriteFileAtomic((dir / "planes.json").string(), json);
     ds::WritePng16((dir / "labels.png").string(), labels);
     ds::WritePngRgb((dir / "labels_color.png").string(), colour);
@@ -268,11 +357,11 @@ class DetectCommand : public Command {
 
     if (!options_.quiet) {
       char line[256];
-      std::printf("input      %s (%dx%d, %zu valid pixels)\n", input_.c_str(), cloud.width,
+      Appendf(&output.out, "input      %s (%dx%d, %zu valid pixels)\n", input.c_str(), cloud.width,
                   cloud.height, valid);
-      std::printf("method     %s, threshold model %s\n", detector->Name().c_str(),
+      Appendf(&output.out, "method     %s, threshold model %s\n", detector->Name().c_str(),
                   section.threshold_model.c_str());
-      std::printf("planes     %zu, %.1f %% of valid pixels assigned\n", seg.planes.size(),
+      Appendf(&output.out, "planes     %zu, %.1f %% of valid pixels assigned\n", seg.planes.size(),
                   valid ? 100.0 * assigned / valid : 0.0);
       std::string stages;
       for (const auto& [stage, ms] : seg.timings_ms) {
@@ -280,27 +369,29 @@ class DetectCommand : public Command {
                       ms);
         stages += line;
       }
-      std::printf("time       detect %.2f ms (%s), load %.1f ms, write %.1f ms\n", detect_ms,
+      Appendf(&output.out, "time       detect %.2f ms (%s), load %.1f ms, write %.1f ms\n", detect_ms,
                   stages.c_str(), Ms(t0, t1), Ms(t2, t3));
       const std::size_t shown = std::min<std::size_t>(seg.planes.size(), 10);
       for (std::size_t i = 0; i < shown; ++i) {
         const auto& p = seg.planes[i];
-        std::printf("  plane %2d  n = (%6.3f %6.3f %6.3f)  d = %6.3f m  %7lld px  rms %.1f mm\n",
+        Appendf(&output.out, "  plane %2d  n = (%6.3f %6.3f %6.3f)  d = %6.3f m  %7lld px  rms %.1f mm\n",
                     p.id, p.normal.x(), p.normal.y(), p.normal.z(), p.d,
                     static_cast<long long>(p.point_count), 1000.0 * std::sqrt(p.mse));
       }
       if (seg.planes.size() > shown)
-        std::printf("  ... %zu more in planes.json\n", seg.planes.size() - shown);
-      std::printf("output     %s (planes.json, labels.png, labels_color.png%s, segmented.ply%s)\n",
-                  out_.c_str(), have_classes ? ", classes.png" : "",
+        Appendf(&output.out, "  ... %zu more in planes.json\n", seg.planes.size() - shown);
+      Appendf(&output.out, "output     %s (planes.json, labels.png, labels_color.png%s, segmented.ply%s)\n",
+                  out_dir.c_str(), have_classes ? ", classes.png" : "",
                   std::filesystem::exists(dir / "report.html") ? ", report.html" : "");
     }
-    return 0;
+    return output;
   }
 
  private:
-  std::string input_;
+  std::vector<std::string> inputs_;
   std::string out_;
+  int threads_ = 0;
+  mutable std::mutex detect_mutex_;
   std::string method_;
   std::string intrinsics_;
   std::string sensor_;

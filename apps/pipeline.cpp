@@ -20,13 +20,17 @@ void ParallelFor(std::size_t count, std::size_t threads,
   std::atomic<std::size_t> next{0};
   std::mutex error_mutex;
   std::exception_ptr first_error;
+  std::size_t first_error_index = count;
   auto work = [&] {
     for (std::size_t i = next++; i < count; i = next++) {
       try {
         task(i);
       } catch (...) {
         std::lock_guard<std::mutex> lock(error_mutex);
-        if (!first_error) first_error = std::current_exception();
+        if (i < first_error_index) {
+          first_error = std::current_exception();
+          first_error_index = i;
+        }
       }
     }
   };

@@ -103,7 +103,8 @@ class OrderedPipeline {
 };
 
 /// Runs `task(i)` for i in 0..count-1 on `threads` threads (inline when 1); tasks must touch
-/// disjoint state. The first exception thrown is rethrown after every thread has finished.
+/// disjoint state. Every task runs; then the exception of the lowest failing index, if any, is
+/// rethrown (the one a sequential loop would have met first).
 void ParallelFor(std::size_t count, std::size_t threads,
                  const std::function<void(std::size_t)>& task);
 

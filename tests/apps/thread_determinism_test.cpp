@@ -1,7 +1,8 @@
 // `planeslam run` gives the same outputs whatever its thread count: every file byte for byte,
 // except the timing fields (summary.json's time_ms, frames_per_second and the back end's ms per
 // frame, also embedded in report.html) and the run.threads line of config.yaml. Also the ordered
-// pipeline the run reads ahead with: items in order, exceptions delivered with their item.
+// pipeline the run reads ahead with: items in order, exceptions delivered with their item; and
+// `detect` on several inputs.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -186,6 +187,47 @@ TEST(ParallelFor, EveryIndexOnceAndFirstErrorRethrown) {
                                   }),
                  std::runtime_error);
   }
+}
+
+/// planes.json without its timing fields.
+nlohmann::json PlanesWithoutTimes(const fs::path& file) {
+  nlohmann::json planes = nlohmann::json::parse(Slurp(file));
+  planes.erase("detect_ms");
+  planes.erase("timings_ms");
+  return planes;
+}
+
+// `detect` on several inputs (in parallel): one folder per input with the files a run on that
+// input alone writes; an unreadable input is reported and skipped (exit 5).
+TEST(DetectSeveralInputs, SameFilesAsOneByOneAndBadInputSkipped) {
+  PLANESLAM_REQUIRE_DATA();
+  const fs::path dir = ScratchDir();
+  const fs::path depth = DataDir() / "tum_fr3_structure_notexture_far" / "depth";
+  std::vector<fs::path> pngs;
+  for (const auto& entry : fs::directory_iterator(depth)) pngs.push_back(entry.path());
+  std::sort(pngs.begin(), pngs.end());
+  pngs.resize(3);
+  const std::string common = " --set report.enabled=false -q";
+  std::string all;
+  for (const fs::path& png : pngs) all += png.string() + " ";
+  const CliResult several =
+      RunCli("detect " + all + (dir / "missing.png").string() + " --out " +
+                 (dir / "several").string() + common,
+             dir);
+  EXPECT_EQ(several.exit_code, 5) << several.err;
+  EXPECT_NE(several.err.find("missing.png"), std::string::npos) << several.err;
+  for (const fs::path& png : pngs) {
+    const std::string stem = png.stem().string();
+    const CliResult one =
+        RunCli("detect " + png.string() + " --out " + (dir / stem).string() + common, dir);
+    ASSERT_EQ(one.exit_code, 0) << one.err;
+    EXPECT_EQ(PlanesWithoutTimes(dir / stem / "planes.json"),
+              PlanesWithoutTimes(dir / "several" / stem / "planes.json"));
+    for (const char* file : {"labels.png", "segmented.ply", "config.yaml"}) {
+      EXPECT_TRUE(Slurp(dir / stem / file) == Slurp(dir / "several" / stem / file)) << file;
+    }
+  }
+  EXPECT_FALSE(fs::exists(dir / "several" / "missing"));
 }
 
 }  // namespace
