@@ -96,6 +96,19 @@ step graph_garage "$PLANESLAM" graph optimize "$DATA/pose_graphs/parking-garage.
   --raw-information --set pose_graph.loop_closure_loss=none --out "$OUT/garage_opt.g2o" \
   --json "$OUT/graph_garage.json"
 
+# 7. Throughput: `planeslam run` end to end (start-up to the last file) on one and two threads,
+# alternating; the wall time is the last line of each .txt.
+timed() {
+  local t0=$EPOCHREALTIME
+  "$@"
+  awk -v a="$t0" -v b="$EPOCHREALTIME" 'BEGIN { printf "wall %.3f s\n", b - a }'
+}
+for r in 1 2 3; do
+  for t in 1 2; do
+    step "run_tum_t${t}_$r" timed "$PLANESLAM" run "$TUM" -q --threads "$t" --out "$OUT/run_tum_t$t"
+  done
+done
+
 echo "finished: $(date -u +%FT%TZ), $((SECONDS - START)) s, load average $(cut -d' ' -f1-3 /proc/loadavg)" \
   >>"$OUT/machine.txt"
 python3 docs/headline.py "$OUT" | tee "$OUT/headline.txt"
