@@ -340,8 +340,8 @@ BatchPlan ReadPlanJson(const std::string& batch_dir) {
   BatchPlan plan;
   try {
     plan.manifest = j.at("manifest").get<std::string>();
-    for (const auto& s : j.at("sequences")) plan.sequences.push_back({s.get<std::string>(), "", "", "", {}, {}});
-    for (const auto& v : j.at("variants")) plan.variants.push_back({v.get<std::string>(), {}, {}});
+    for (const auto& s : j.at("sequences")) plan.sequences.push_back({s.get<std::string>(), "", "", "", {}, {}, {}});
+    for (const auto& v : j.at("variants")) plan.variants.push_back({v.get<std::string>(), {}, {}, ""});
     for (const auto& job : j.at("jobs")) {
       plan.jobs.push_back({job.at("name").get<std::string>(), job.at("sequence").get<std::string>(),
                            job.at("variant").get<std::string>(),

@@ -95,8 +95,37 @@ class ManifestReader {
   std::string path_;
 };
 
-BatchSequence ReadSequence(const ManifestReader& r, const YAML::Node& node) {
-  r.CheckKeys(node, {"path", "scene", "name", "profile", "configs", "set"}, "a sequence");
+/// Whether `v` is selected by the name `wanted`: its own name, or its manifest entry's (which
+/// selects every variant of that entry's sweep).
+bool Selects(const std::string& wanted, const BatchVariant& v) {
+  return wanted == v.name || (!v.entry.empty() && wanted == v.entry);
+}
+
+/// A sequence's `variants:` (one name or a list); every name must select a variant.
+std::vector<std::string> ReadSelection(const ManifestReader& r, const YAML::Node& node,
+                                       const std::vector<BatchVariant>& variants) {
+  std::vector<std::string> names;
+  if (!node) return names;
+  if (node.IsScalar()) names.push_back(r.Scalar(node, "variants"));
+  else if (node.IsSequence() && node.size() > 0)
+    for (const auto& n : node) names.push_back(r.Scalar(n, "a variant name"));
+  else r.Fail(node, "a sequence's variants must be a variant name or a non-empty list of them");
+  for (const std::string& name : names) {
+    bool found = false;
+    for (const BatchVariant& v : variants) found = found || Selects(name, v);
+    if (!found) {
+      std::string known;
+      for (const BatchVariant& v : variants) known += " " + v.name;
+      r.Fail(node, "no variant named '" + name + "' (variants:" + known + ")");
+    }
+  }
+  return names;
+}
+
+BatchSequence ReadSequence(const ManifestReader& r, const YAML::Node& node,
+                           const std::vector<BatchVariant>& variants) {
+  r.CheckKeys(node, {"path", "scene", "name", "profile", "configs", "set", "variants"},
+              "a sequence");
   BatchSequence s;
   if (node["path"] && node["scene"]) r.Fail(node, "a sequence has either path or scene");
   if (node["path"]) {
@@ -120,6 +149,7 @@ BatchSequence ReadSequence(const ManifestReader& r, const YAML::Node& node) {
   }
   s.configs = r.Configs(node["configs"]);
   s.set = r.Set(node["set"]);
+  s.variants = ReadSelection(r, node["variants"], variants);
   return s;
 }
 
@@ -130,6 +160,7 @@ std::vector<BatchVariant> ReadVariant(const ManifestReader& r, const YAML::Node&
   if (node["name"]) base.name = r.Scalar(node["name"], "name");
   if (!node["name"] && !node["sweep"]) r.Fail(node, "a variant needs a name (or a sweep)");
   if (!base.name.empty()) r.CheckName(node["name"], base.name);
+  base.entry = base.name;
   base.configs = r.Configs(node["configs"]);
   base.set = r.Set(node["set"]);
   std::vector<BatchVariant> variants{base};
@@ -190,6 +221,9 @@ void BuildJobs(const ManifestReader& r, const std::vector<std::string>& configs,
                const KeyValues& set, BatchPlan* plan) {
   for (const BatchSequence& s : plan->sequences) {
     for (const BatchVariant& v : plan->variants) {
+      bool selected = s.variants.empty();
+      for (const std::string& wanted : s.variants) selected = selected || Selects(wanted, v);
+      if (!selected) continue;
       BatchJob job;
       job.sequence = s.name;
       job.variant = v.name;
@@ -263,8 +297,6 @@ BatchPlan LoadBatchManifest(const std::string& path) {
   if (!seqs || !seqs.IsSequence() || seqs.size() == 0) {
     r.Fail(seqs ? seqs : root, "sequences: must list at least one sequence");
   }
-  for (const auto& s : seqs) plan.sequences.push_back(ReadSequence(r, s));
-  CheckUnique(r, seqs, plan.sequences, "sequences");
   const YAML::Node vars = root["variants"];
   if (vars && !vars.IsNull()) {
     if (!vars.IsSequence() || vars.size() == 0) r.Fail(vars, "variants: must be a non-empty list");
@@ -273,8 +305,10 @@ BatchPlan LoadBatchManifest(const std::string& path) {
     }
     CheckUnique(r, vars, plan.variants, "variants");
   } else {
-    plan.variants.push_back({"default", {}, {}});
+    plan.variants.push_back({"default", {}, {}, "default"});
   }
+  for (const auto& s : seqs) plan.sequences.push_back(ReadSequence(r, s, plan.variants));
+  CheckUnique(r, seqs, plan.sequences, "sequences");
   if (root["time_limit"]) {
     plan.time_limit_s = ParseTimeLimit(r.Scalar(root["time_limit"], "time_limit"),
                                        plan.manifest + ": time_limit");

@@ -3,7 +3,8 @@
 ///
 ///   sequences:                  # each: path (folder, relative to the manifest) or scene
 ///     - path: room              #   (built-in synthetic scene); name (default: the folder's name),
-///       profile: tum_fr3        #   profile (--sensor; default: recognised), configs, set
+///       profile: tum_fr3        #   profile (--sensor; default: recognised), configs, set,
+///       variants: [default]     #   variants (the names it runs under; default: every variant)
 ///   variants:                   # each: name, configs, set, sweep {key: [values]} (one variant
 ///     - name: default           #   per combination, named name+key=value...); default: one
 ///     - name: fast              #   variant "default" without overrides
@@ -11,6 +12,9 @@
 ///   set: {octomap.enabled: false}   # applied to every job (so are configs:)
 ///   time_limit: "00:30:00"      # per job, [D-]HH:MM:SS or minutes (local and Slurm)
 ///   slurm: {partition: p, cpus_per_task: 1, mem: 4G, max_parallel: 8, extra: [--qos=normal]}
+///
+/// The batch is the product of sequences and variants, less the pairs a sequence's `variants:`
+/// leaves out; a name there selects a variant, or every variant its sweep made from one entry.
 ///
 /// A job's arguments: the sequence, --sensor, -c files (global, sequence, variant), then --set
 /// overrides (global, sequence, variant, sweep); later overrides win.
@@ -29,6 +33,7 @@ struct BatchSequence {
   std::string profile;
   std::vector<std::string> configs;  ///< absolute
   KeyValues set;
+  std::vector<std::string> variants;  ///< names of the variants it runs under; empty: all
 };
 
 /// One variant after sweep expansion.
@@ -36,6 +41,7 @@ struct BatchVariant {
   std::string name;
   std::vector<std::string> configs;  ///< absolute
   KeyValues set;
+  std::string entry;  ///< the name of the manifest entry it came from ("" for an unnamed sweep)
 };
 
 /// sbatch resources; empty / zero: the cluster's defaults.
@@ -57,7 +63,7 @@ struct BatchPlan {
   std::string manifest;  ///< absolute path
   std::vector<BatchSequence> sequences;
   std::vector<BatchVariant> variants;
-  std::vector<BatchJob> jobs;  ///< sequence-major product
+  std::vector<BatchJob> jobs;  ///< sequence-major, in the manifest's order
   double time_limit_s = 0.0;   ///< 0 = none
   SlurmOptions slurm;
 };

@@ -55,6 +55,14 @@ const char* StateName(JobState s) {
   return "";
 }
 
+/// "9 jobs (3 sequences x 3 variants)", or "... , not every sequence under every variant)".
+std::string JobCount(const BatchPlan& plan) {
+  const std::size_t product = plan.sequences.size() * plan.variants.size();
+  return std::to_string(plan.jobs.size()) + " jobs (" + std::to_string(plan.sequences.size()) +
+         " sequences x " + std::to_string(plan.variants.size()) + " variants" +
+         (plan.jobs.size() < product ? ", not every sequence under every variant)" : ")");
+}
+
 class BatchCommand : public Command {
  public:
   std::string Name() const override { return "batch"; }
@@ -122,8 +130,7 @@ class BatchCommand : public Command {
     const std::string meta = BatchMetaDir(dir);
     EnsureDirectory(meta);
     ds::WriteFileAtomic(meta + "/jobs.json", PlanJson(plan, binary, dir).dump(2) + "\n");
-    std::cout << "planeslam batch: " << plan.jobs.size() << " jobs (" << plan.sequences.size()
-              << " sequences x " << plan.variants.size() << " variants), "
+    std::cout << "planeslam batch: " << JobCount(plan) << ", "
               << plan.jobs.size() - pending.size() << " complete, " << pending.size()
               << " to run; outputs in " << dir << "/\n";
     if (slurm_) return Slurm(plan, binary, dir, pending);
@@ -148,6 +155,8 @@ class BatchCommand : public Command {
            "chooses\n"
            "    - {path: data/fr3, name: fr3, profile: tum_fr3, configs: [my.yaml], set: "
            "{run.max_frames: 300}}\n"
+           "    - {path: data/lab, variants: [default, theta]}   # only under these (default: "
+           "all)\n"
            "  variants:                      # default: one variant 'default'\n"
            "    - name: default\n"
            "    - name: fast\n"
@@ -174,8 +183,7 @@ class BatchCommand : public Command {
 
   int DryRun(const BatchPlan& plan, const std::string& binary, const std::string& dir,
              const std::vector<JobStatus>& states) const {
-    std::cout << plan.jobs.size() << " jobs (" << plan.sequences.size() << " sequences x "
-              << plan.variants.size() << " variants), outputs in " << dir << "/\n";
+    std::cout << JobCount(plan) << ", outputs in " << dir << "/\n";
     for (std::size_t i = 0; i < plan.jobs.size(); ++i) {
       std::cout << plan.jobs[i].name << " [" << StateName(states[i].state) << "]\n  "
                 << RunCommandLine(binary, dir, plan.jobs[i]) << "\n";

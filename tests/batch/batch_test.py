@@ -70,8 +70,13 @@ def make_sequences(planeslam, data):
 
 
 def write_manifest(path, sequences):
-    lines = ["# nine jobs: three sequences x three variants", "sequences:"]
-    lines += ["  - path: " + s for s in sequences]
+    """`sequences`: folder paths, or (path, variant names) for a sequence run under those only."""
+    lines = ["# three sequences x three variants", "sequences:"]
+    for s in sequences:
+        if isinstance(s, tuple):
+            lines += [f"  - path: {s[0]}", f"    variants: [{', '.join(s[1])}]"]
+        else:
+            lines += ["  - path: " + s]
     lines += ["variants:", "  - name: default", "  - name: fast",
               "    set: {detection.method: grid-fast}",
               "  - name: decimated", "    set: {run.decimation: 2}",
@@ -231,19 +236,25 @@ def test_interrupt(planeslam, manifest, out_dir):
 
 
 def test_corrupt_sequence(planeslam, data, work, refs):
-    """A sequence whose first frame is truncated: its jobs fail, the others complete."""
+    """Nine jobs, one of them on a sequence whose first frame is truncated: it fails with its
+    error, the other eight complete (the last two sequences run under some variants only)."""
     broken = data / "broken"
     if not broken.exists():
         shutil.copytree(data / "rubble", broken)
         first = sorted((broken / "depth").glob("*.png"))[0]
         first.write_bytes(first.read_bytes()[:100])
     manifest = work / "corrupt.yaml"
-    write_manifest(manifest, ["data/room", "data/corridor", "data/broken"])
+    write_manifest(manifest, ["data/room", "data/corridor", ("data/rubble", ["default", "fast"]),
+                              ("data/broken", ["default"])])
     out_dir = work / "corrupt"
     r = run([planeslam, "batch", manifest, "--out", out_dir, "--jobs", "2"])
     check(r.returncode == 2, f"corrupt sequence: the batch exits 2 (got {r.returncode})")
-    good = [f"{s}/{v}" for s in ("room", "corridor") for v in VARIANTS]
-    bad = [f"broken/{v}" for v in VARIANTS]
+    check("planeslam batch: 9 jobs" in r.stdout, "corrupt sequence: nine jobs")
+    good = [f"{s}/{v}" for s in ("room", "corridor") for v in VARIANTS] + ["rubble/default",
+                                                                          "rubble/fast"]
+    bad = ["broken/default"]
+    check(sorted(complete_jobs(out_dir)) == sorted(good), "corrupt sequence: the other eight complete")
+    check("8 of 9 jobs complete" in r.stdout, "corrupt sequence: the batch says 8 of 9 complete")
     check_jobs_equal_references(out_dir, refs, good, "corrupt sequence: other job")
     for name in bad:
         check(not (out_dir / name).exists(), f"corrupt sequence: no folder {name}")
@@ -253,6 +264,12 @@ def test_corrupt_sequence(planeslam, data, work, refs):
               f"corrupt sequence: {name} recorded with exit 2 and the bad file: {j.get('error')}")
         check(f"{name}: failed (exit 2)" in r.stdout, f"corrupt sequence: the batch lists {name}")
     check_collect(planeslam, out_dir, good, bad)
+    rows = {f"{j['sequence']}/{j['variant']}": j for j in read_json(out_dir / "results.json")["jobs"]}
+    md = (out_dir / "results.md").read_text()
+    for name in bad:
+        error = read_json(out_dir / ".batch" / "failed" / name / "job.json").get("error", "")
+        check(bool(error) and error in rows.get(name, {}).get("error", "") and error in md,
+              f"collect: {name}'s row holds its error line (results.json, results.md): {error}")
 
 
 def test_outdated(planeslam, manifest, out_dir):
@@ -347,7 +364,24 @@ def mode_manifest(planeslam, work):
     check("--set run.max_frames=5 --set detection.method=grid" in r.stdout,
           "sweep: a sequence's own overrides")
 
+    subset = work / "subset.yaml"
+    subset.write_text("sequences:\n  - path: room\n  - {path: corridor, variants: fast}\n"
+                      "  - {scene: rubble, variants: [default, t]}\n"
+                      "variants:\n  - name: default\n  - name: fast\n"
+                      "    set: {detection.method: grid-fast}\n"
+                      "  - name: t\n    sweep: {detection.theta: [200, 800]}\n")
+    r = run([planeslam, "batch", subset, "--out", work / "o", "--dry-run"])
+    names = [line.split(" ")[0] for line in r.stdout.splitlines()[1:] if not line.startswith(" ")]
+    expected = ["room/default", "room/fast", "room/t+detection.theta=200",
+                "room/t+detection.theta=800", "corridor/fast", "rubble/default",
+                "rubble/t+detection.theta=200", "rubble/t+detection.theta=800"]
+    check(r.returncode == 0 and names == expected,
+          f"a sequence under some variants only (a name selects its whole sweep): {names}")
+
     bad_cases = {
+        "unknown variant of a sequence": ("sequences:\n  - {path: room, variants: [b]}\n"
+                                          "variants:\n  - name: a\n",
+                                          ":2: no variant named 'b' (variants: a)"),
         "unknown key": ("sequences:\n  - path: room\nvariant:\n  - name: a\n", ":3: unknown key 'variant'"),
         "missing sequence": ("sequences:\n  - path: nowhere\n", ":2: sequence "),
         "duplicate variant": ("sequences:\n  - path: room\nvariants:\n  - name: a\n  - name: a\n",
