@@ -5,12 +5,15 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <iostream>
 #include <sstream>
+#include <string>
+#include <thread>
 
 #include "batch_job.hpp"
 #include "exit_codes.hpp"
@@ -131,6 +134,10 @@ int RunWithParallel(const BatchPlan& plan, const std::string& binary, const std:
       "--joblog",   meta + "/parallel.joblog",
       "--arg-file", commands};
   ::setenv("PARALLEL_SHELL", "/bin/sh", 1);
+  // Jobs running side by side share the cores instead of each starting one thread per core.
+  const int cores = std::max(1u, std::thread::hardware_concurrency());
+  const int slots = jobs > 0 ? jobs : cores;
+  ::setenv("PLANESLAM_BATCH_THREADS", std::to_string(std::max(1, cores / slots)).c_str(), 1);
   struct sigaction action {}, old_int{}, old_term{};
   action.sa_handler = ForwardToEngine;
   sigemptyset(&action.sa_mask);

@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <cerrno>
 #include <chrono>
 #include <cstring>
@@ -302,6 +303,15 @@ int RunBatchJob(const std::string& batch_dir, const std::string& name, double ti
 
   std::vector<std::string> argv = command;
   argv.insert(argv.end(), {"--out", tmp.string()});
+  // The cores this job may use: Slurm's allocation, or the local batch's share of the machine.
+  // Not part of the recorded arguments: the thread count never changes a run's outputs.
+  for (const char* var : {"SLURM_CPUS_PER_TASK", "PLANESLAM_BATCH_THREADS"}) {
+    const char* value = std::getenv(var);
+    if (value != nullptr && std::atoi(value) > 0) {
+      argv.insert(argv.end(), {"--threads", std::to_string(std::atoi(value))});
+      break;
+    }
+  }
   if (g_signals > 0) {  // interrupted before the run started: nothing to record
     fs::remove_all(tmp);
     return kExitInterrupted;

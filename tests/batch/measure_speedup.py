@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Wall time of the nine-job batch (three simulated sequences x three variants) through GNU
-parallel with --jobs 2 against the same nine `planeslam run`s one after another, measured in
+parallel with --jobs 2 against the same nine `planeslam run`s one after another (each with the
+threads a job of --jobs 2 gets, the same command line; and, for reference, on all cores), measured in
 interleaved rounds (one after another, two at a time, --jobs 2, --jobs 1, ...) so that a change in
 the machine's load touches all of them alike. "Two at a time" starts the same plain runs from
 here, two at once: the best any dispatcher can do on this machine at that moment, so --jobs 2
@@ -22,11 +23,14 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import batch_test  # noqa: E402  (the same sequences, manifest and variants)
 
 
-def plain_commands(planeslam, work, out):
+def plain_commands(planeslam, work, out, threads=None):
+    """The nine plain runs; `threads` as each job of `--jobs 2` runs them (None: all cores)."""
     commands = []
     for scene in batch_test.SCENES:
         for variant, overrides in batch_test.VARIANTS.items():
             args = [planeslam, "run", work / "data" / scene, "--out", out / scene / variant, "-q"]
+            if threads is not None:
+                args += ["--threads", threads]
             for key, v in {**batch_test.GLOBAL_SET, **overrides}.items():
                 args += ["--set", f"{key}={v}"]
             commands.append([str(a) for a in args])
@@ -92,21 +96,27 @@ def main():
     rows = []
     for k in range(a.rounds):
         load = os.getloadavg()[0]
-        plain = run_at_most(plain_commands(a.planeslam, work, work / f"plain{k}"), 1)
-        pairs = run_at_most(plain_commands(a.planeslam, work, work / f"pairs{k}"), 2)
+        cores = os.cpu_count()
+        share = max(1, cores // 2)  # the threads `--jobs 2` gives each job
+        plain = run_at_most(plain_commands(a.planeslam, work, work / f"plain{k}", share), 1)
+        plain_all = run_at_most(plain_commands(a.planeslam, work, work / f"all{k}"), 1)
+        pairs = run_at_most(plain_commands(a.planeslam, work, work / f"pairs{k}", share), 2)
         j2, j2_start, j2_end, j2_gap = timed_batch(a.planeslam, manifest, work / f"j2_{k}", 2)
         j1, _, _, j1_gap = timed_batch(a.planeslam, manifest, work / f"j1_{k}", 1)
-        rows.append((plain, pairs, j2, j1))
+        rows.append((plain, pairs, j2, j1, plain_all))
         print(f"round {k + 1} (load {load:.1f}): one after another {plain:.2f} s, two at a time "
               f"{pairs:.2f} s, --jobs 2 {j2:.2f} s, --jobs 1 {j1:.2f} s; --jobs 2 / one after "
               f"another {j2 / plain:.3f}, two at a time / one after another {pairs / plain:.3f}, "
               f"--jobs 2 / two at a time {j2 / pairs:.3f}; --jobs 2: start {j2_start:.3f} s, end "
-              f"{j2_end:.3f} s, gap {1000 * j2_gap:.0f} ms; --jobs 1 gap {1000 * j1_gap:.0f} ms",
+              f"{j2_end:.3f} s, gap {1000 * j2_gap:.0f} ms; --jobs 1 gap {1000 * j1_gap:.0f} ms; "
+              f"one after another on all cores {plain_all:.2f} s, --jobs 2 / that "
+              f"{j2 / plain_all:.3f}",
               flush=True)
     print(f"load after: {os.getloadavg()}")
     for label, i, j in (("--jobs 2 / one after another", 2, 0),
                         ("two at a time / one after another", 1, 0),
-                        ("--jobs 2 / two at a time", 2, 1), ("--jobs 1 / one after another", 3, 0)):
+                        ("--jobs 2 / two at a time", 2, 1), ("--jobs 1 / one after another", 3, 0),
+                        ("--jobs 2 / one after another on all cores", 2, 4)):
         ratios = [r[i] / r[j] for r in rows]
         print(f"median {label}: {statistics.median(ratios):.3f} "
               f"(rounds: {', '.join(f'{x:.3f}' for x in ratios)})")
