@@ -67,11 +67,18 @@ void WriteMapOutputs(const std::string& out_dir, const mapping::SlamSystem& slam
 void WriteOctomap(
     const std::string& out_dir, const mapping::OccupancyMapConfig& config,
     const std::unordered_map<std::int64_t, Pose>& poses,
-    const std::vector<std::pair<std::int64_t, std::vector<Eigen::Vector3f>>>& keyframe_clouds) {
+    const std::vector<std::pair<std::int64_t, std::vector<Eigen::Vector3f>>>& keyframe_clouds,
+    unsigned threads) {
   mapping::OccupancyMapConfig thinned = config;
   thinned.downsample_voxel = 0.0;  // already thinned per keyframe
   mapping::OccupancyMapBuilder octomap(thinned);
-  for (const auto& [id, points] : keyframe_clouds) octomap.Insert(points, poses.at(id));
+  std::vector<const std::vector<Eigen::Vector3f>*> scans;
+  std::vector<Pose> scan_poses;
+  for (const auto& [id, points] : keyframe_clouds) {
+    scans.push_back(&points);
+    scan_poses.push_back(poses.at(id));
+  }
+  octomap.InsertAll(scans, scan_poses, threads);
   octomap.Write(out_dir + "/octomap.bt");
 }
 
@@ -219,7 +226,8 @@ std::string RunSession::Write(const std::string& out_dir) {
   if (want_octomap_) {
     auto job = [this, out_dir, poses = slam_->KeyframePoses(),
                 octomap_config = config_.Get<mapping::OccupancyMapConfig>("octomap")] {
-      WriteOctomap(out_dir, octomap_config, poses, keyframe_clouds_);
+      WriteOctomap(out_dir, octomap_config, poses, keyframe_clouds_,
+                   static_cast<unsigned>(threads()));
     };
     octomap = std::async(threads() > 1 ? std::launch::async : std::launch::deferred, job);
   }

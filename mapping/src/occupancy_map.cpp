@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <deque>
+#include <functional>
+#include <future>
 #include <fstream>
 #include <unordered_map>
 
@@ -81,12 +84,23 @@ OccupancyMapBuilder::OccupancyMapBuilder(const OccupancyMapConfig& config) : con
   impl_->tree.setProbMiss(config_.prob_miss);
 }
 
-void OccupancyMapBuilder::Insert(const std::vector<Eigen::Vector3f>& points_sensor,
-                                 const Pose& T_world_sensor) {
+namespace {
+
+/// The cells one scan frees and occupies, as octomap::OcTree::insertPointCloud computes them. It
+/// depends only on the scan, the pose and the resolution, so scans can be ray-cast in parallel,
+/// each in its own scratch tree (a tree's ray buffer is not shared), and applied in order.
+struct ScanUpdate {
+  octomap::KeySet free_cells, occupied_cells;
+  std::size_t points = 0;
+};
+
+ScanUpdate ComputeScanUpdate(const OccupancyMapConfig& config,
+                             const std::vector<Eigen::Vector3f>& points_sensor,
+                             const Pose& T_world_sensor) {
   PLANESLAM_CHECK(T_world_sensor.matrix().allFinite(), "pose not finite");
   std::vector<Eigen::Vector3f> kept;
-  if (config_.downsample_voxel > 0) {
-    kept = VoxelDownsample(points_sensor, config_.downsample_voxel);
+  if (config.downsample_voxel > 0) {
+    kept = VoxelDownsample(points_sensor, config.downsample_voxel);
   } else {
     kept.reserve(points_sensor.size());
     for (const auto& p : points_sensor) {
@@ -102,12 +116,45 @@ void OccupancyMapBuilder::Insert(const std::vector<Eigen::Vector3f>& points_sens
     scan.push_back(w.x(), w.y(), w.z());
   }
   const octomap::point3d origin(t.x(), t.y(), t.z());
-  // discretize = true: one ray per end voxel (the downsampled points are already about one per
-  // voxel when downsample_voxel ~ resolution; with downsampling off it removes the duplicates).
-  impl_->tree.insertPointCloud(scan, origin, config_.max_range > 0 ? config_.max_range : -1.0,
-                               /*lazy_eval=*/false, /*discretize=*/true);
-  ++impl_->frames;
-  impl_->points += kept.size();
+  // Discretized: one ray per end voxel (the downsampled points are already about one per voxel
+  // when downsample_voxel ~ resolution; with downsampling off it removes the duplicates).
+  octomap::OcTree scratch(config.resolution);
+  ScanUpdate update;
+  scratch.computeDiscreteUpdate(scan, origin, update.free_cells, update.occupied_cells,
+                                config.max_range > 0 ? config.max_range : -1.0);
+  update.points = kept.size();
+  return update;
+}
+
+}  // namespace
+
+void OccupancyMapBuilder::Insert(const std::vector<Eigen::Vector3f>& points_sensor,
+                                 const Pose& T_world_sensor) {
+  InsertAll({&points_sensor}, {T_world_sensor}, 1);
+}
+
+void OccupancyMapBuilder::InsertAll(const std::vector<const std::vector<Eigen::Vector3f>*>& scans,
+                                    const std::vector<Pose>& poses, unsigned threads) {
+  PLANESLAM_CHECK(scans.size() == poses.size(), "one pose per scan");
+  // At most `threads` scans are ray-cast ahead of the one being applied (memory stays bounded).
+  std::deque<std::future<ScanUpdate>> ahead;
+  std::size_t next = 0;
+  const auto launch = [&] {
+    const auto policy = threads > 1 ? std::launch::async : std::launch::deferred;
+    ahead.push_back(std::async(policy, ComputeScanUpdate, std::cref(config_),
+                               std::cref(*scans[next]), std::cref(poses[next])));
+    ++next;
+  };
+  while (next < scans.size() || !ahead.empty()) {
+    while (next < scans.size() && ahead.size() < std::max(1u, threads)) launch();
+    const ScanUpdate update = ahead.front().get();
+    ahead.pop_front();
+    // Applied as insertPointCloud does: free cells, then occupied ones.
+    for (const auto& key : update.free_cells) impl_->tree.updateNode(key, false, false);
+    for (const auto& key : update.occupied_cells) impl_->tree.updateNode(key, true, false);
+    ++impl_->frames;
+    impl_->points += update.points;
+  }
 }
 
 void OccupancyMapBuilder::Write(const std::string& path) const {
@@ -171,6 +218,8 @@ OccupancyMapBuilder::OccupancyMapBuilder(const OccupancyMapConfig& config) : con
 }
 
 void OccupancyMapBuilder::Insert(const std::vector<Eigen::Vector3f>&, const Pose&) {}
+void OccupancyMapBuilder::InsertAll(const std::vector<const std::vector<Eigen::Vector3f>*>&,
+                                    const std::vector<Pose>&, unsigned) {}
 
 void OccupancyMapBuilder::Write(const std::string& path) const {
   throw IoError(path, "planeslam was built without OctoMap (PLANESLAM_WITH_OCTOMAP=OFF)");

@@ -64,6 +64,10 @@ class OccupancyMapBuilder {
   /// Ray-casts the valid points of a frame (sensor frame) seen from T_world_sensor.
   void Insert(const datasets::OrganizedCloud& cloud, const Pose& T_world_sensor);
   void Insert(const std::vector<Eigen::Vector3f>& points_sensor, const Pose& T_world_sensor);
+  /// As Insert on each scan in order, with the ray casting spread over `threads` threads; the map
+  /// is the same for every thread count. `scans[i]` is seen from `poses[i]`.
+  void InsertAll(const std::vector<const std::vector<Eigen::Vector3f>*>& scans,
+                 const std::vector<Pose>& poses, unsigned threads);
 
   /// Writes the maximum-likelihood map as OctoMap binary (.bt) atomically; IoError on failure or
   /// when built without OctoMap. The in-memory map keeps its probabilities (only pruned).
