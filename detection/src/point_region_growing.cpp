@@ -179,11 +179,20 @@ class PbrgPass {
       // from an integer, far beyond the product's rounding.
       const int qy = static_cast<int>((q + 0.5) * inv_width);
       const int qx = q - qy * width_;
-      if (qx + 1 < width_) TryJoin(q, q + 1, g);
-      if (qx > 0) TryJoin(q, q - 1, g);
-      if (qy + 1 < height_) TryJoin(q, q + width_, g);
-      if (qy > 0) TryJoin(q, q - width_, g);
+      if (qx + 1 < width_) Consider(q, q + 1, g);
+      if (qx > 0) Consider(q, q - 1, g);
+      if (qy + 1 < height_) Consider(q, q + width_, g);
+      if (qy > 0) Consider(q, q - width_, g);
     }
+  }
+
+  /// Neighbour c of region point q: most are in the region already, invalid, or in R' (left
+  /// PCD, Algorithm 1 line 3), told by three loads here; the others are tested by TryJoin.
+  void Consider(int q, int c, Growth* g) {
+    const int owner = ws_.labels[c];
+    if (owner == g->r || ws_.rel2[c] < 0) return;
+    if (owner < 0 && ws_.visited[c]) return;
+    TryJoin(q, c, owner, g);
   }
 
   /// Fetches what TryJoin reads of the 4-neighbours of pixel q (within the image's memory).
@@ -288,11 +297,9 @@ class PbrgPass {
     }
   }
 
-  /// Tests neighbour c of region point q for region `g` and adds it when it joins.
-  void TryJoin(int q, int c, Growth* g) {
-    const int owner = ws_.labels[c];
-    if (owner == g->r || ws_.rel2[c] < 0) return;
-    if (owner < 0 && ws_.visited[c]) return;  // in R': left PCD (Algorithm 1 line 3)
+  /// Tests neighbour c of region point q (of region `owner`, -1: none) for region `g` and adds
+  /// it when it joins.
+  __attribute__((noinline)) void TryJoin(int q, int c, int owner, Growth* g) {
     const Eigen::Vector3f& pq = pts_[q];
     const Eigen::Vector3f& pcf = pts_[c];
     const double zc = internal::PointDepth(pcf, spherical_);
