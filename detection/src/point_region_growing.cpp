@@ -229,8 +229,15 @@ class PbrgPass {
     return mse < params_.Epsilon(merged.EffectiveMse(normal, merged.NormalTilt(l2)), merged.k);
   }
 
+  /// The approximate join's distance test of point c (at pc) against region g's current plane.
+  /// Its bound is at least its cheap part, the base gamma: within that, no roots needed.
+  bool NearCurrentPlane(int c, const Eigen::Vector3d& pc, const Growth& g) const {
+    const double dist = std::abs(g.fit.normal.dot(pc) - g.fit.d);
+    return dist < params_.gamma || dist < GammaFor(g.fit, g.region, c, pc);
+  }
+
   /// The join test of point c (at pc) for region `g`, `merged` being g's moments with c added
-  /// (Algorithm 1 line 9).
+  /// (Algorithm 1 line 9). Between refits (refit_interval != 1), c has passed NearCurrentPlane.
   JoinTest TestJoin(int c, const Eigen::Vector3d& pc, const Growth& g,
                     const MomentSums& merged) const {
     JoinTest test;
@@ -245,11 +252,8 @@ class PbrgPass {
           MseWithinEpsilon(test.new_fit.mse, merged, test.new_fit.normal, test.new_fit.l2);
       return test;
     }
-    // Approximate distance test against the current plane; MSE bound about its normal. Each
-    // bound is at least its cheap part (the base gamma; epsilon of the noise along the normal
-    // alone, which the tilt term only raises): within that, no roots needed.
-    const double dist = std::abs(fit.normal.dot(pc) - fit.d);
-    if (dist >= params_.gamma && dist >= GammaFor(fit, g.region, c, pc)) return test;
+    // MSE bound about the current normal. The bound is at least its cheap part (epsilon of the
+    // noise along the normal alone, which the tilt term only raises): within that, no roots.
     if (MseAboutWithinEpsilon(merged, fit.normal, params_) ||
         MseWithinEpsilon(merged.MseAbout(fit.normal), merged, fit.normal, fit.l2)) {
       test.accept = true;
@@ -306,6 +310,9 @@ class PbrgPass {
     const double delta_c = params_.Delta(zc);
     if ((pcf - pq).squaredNorm() >= delta_c * delta_c) return;  // dis(GR, p_c) < delta
     const Eigen::Vector3d pc = pcf.cast<double>();
+    // Between refits the distance to the current plane turns most points away before their
+    // merged moments are formed.
+    if (point_.refit_interval != 1 && !NearCurrentPlane(c, pc, *g)) return;
     MomentSums merged = g->region;
     merged.Add(pc.x(), pc.y(), pc.z(), ws_.rel2[c]);
     const JoinTest test = TestJoin(c, pc, *g, merged);
