@@ -39,11 +39,18 @@ struct Seed {
 };
 
 /// A region while it grows: its index, moments, current plane and joins since the last refit.
+/// The moments with a tested point added are formed in the spare of two buffers, which becomes
+/// the region's on a join (no copy either way).
 struct Growth {
   int r = 0;
-  MomentSums region;
+  MomentSums sums[2];
+  int current = 0;
   FastFit fit;
   double since_refit = 0;
+
+  const MomentSums& Region() const { return sums[current]; }
+  MomentSums& Spare() { return sums[current ^ 1]; }
+  void TakeSpare() { current ^= 1; }
 };
 
 /// Outcome of the join test of one point.
@@ -99,7 +106,7 @@ class PbrgPass {
       if (!PlanarSeed(&seed)) continue;
       Growth g = StartRegion(seed);
       Grow(&g);
-      CloseRegion(g.region);
+      CloseRegion(g.Region());
     }
   }
 
@@ -151,7 +158,7 @@ class PbrgPass {
   Growth StartRegion(const Seed& seed) {
     Growth g;
     g.r = static_cast<int>(ws_.regions.size());
-    g.region = seed.region;
+    g.sums[0] = seed.region;
     g.fit = seed.fit;
     ws_.members.clear();
     ws_.members.push_back(static_cast<int>(seed.s));
@@ -233,7 +240,7 @@ class PbrgPass {
   /// Its bound is at least its cheap part, the base gamma: within that, no roots needed.
   bool NearCurrentPlane(int c, const Eigen::Vector3d& pc, const Growth& g) const {
     const double dist = std::abs(g.fit.normal.dot(pc) - g.fit.d);
-    return dist < params_.gamma || dist < GammaFor(g.fit, g.region, c, pc);
+    return dist < params_.gamma || dist < GammaFor(g.fit, g.Region(), c, pc);
   }
 
   /// The join test of point c (at pc) for region `g`, `merged` being g's moments with c added
@@ -283,10 +290,11 @@ class PbrgPass {
     return true;
   }
 
-  /// Takes `merged` as the region's moments and updates its plane: the refitted one when the test
-  /// refitted, else a refit every refit_interval joins (adaptive: every max(1, K/64)).
-  void Advance(const MomentSums& merged, const JoinTest& test, Growth* g) const {
-    g->region = merged;
+  /// Takes the spare moments (the region with the point) as the region's and updates its plane:
+  /// the refitted one when the test refitted, else a refit every refit_interval joins (adaptive:
+  /// every max(1, K/64)).
+  void Advance(const JoinTest& test, Growth* g) const {
+    g->TakeSpare();
     g->since_refit += 1.0;
     if (test.refitted) {
       g->fit = test.new_fit;
@@ -294,9 +302,10 @@ class PbrgPass {
       return;
     }
     const int refit_interval = point_.refit_interval;
-    const double interval = refit_interval > 0 ? refit_interval : std::max(1.0, g->region.k / 64.0);
+    const double interval =
+        refit_interval > 0 ? refit_interval : std::max(1.0, g->Region().k / 64.0);
     if (g->since_refit >= interval) {
-      g->fit = RefitFrom(g->region, g->fit.normal);
+      g->fit = RefitFrom(g->Region(), g->fit.normal);
       g->since_refit = 0;
     }
   }
@@ -313,13 +322,13 @@ class PbrgPass {
     // Between refits the distance to the current plane turns most points away before their
     // merged moments are formed.
     if (point_.refit_interval != 1 && !NearCurrentPlane(c, pc, *g)) return;
-    MomentSums merged = g->region;
-    merged.Add(pc.x(), pc.y(), pc.z(), ws_.rel2[c]);
+    MomentSums& merged = g->Spare();
+    merged.SetSum(g->Region(), pc.x(), pc.y(), pc.z(), ws_.rel2[c]);
     const JoinTest test = TestJoin(c, pc, *g, merged);
     if (!test.accept) return;
     if (owner >= 0 && !TakeJointPoint(c, pc, owner, test.refitted ? test.new_fit : g->fit, merged))
       return;
-    Advance(merged, test, g);
+    Advance(test, g);
     ws_.labels[c] = g->r;
     ws_.visited[c] = 1;
     ws_.members.push_back(c);
