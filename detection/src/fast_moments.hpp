@@ -58,6 +58,26 @@ struct MomentSums {
     wyz += w * (y * z);
     wzz += w * (z * z);
   }
+  /// Sets this to `a` with point (x, y, z) of relative noise w added: the same sums as a copy of
+  /// `a` and Add, without the copy.
+  void SetSum(const MomentSums& a, double x, double y, double z, double w) {
+    k = a.k + 1.0;
+    sx = a.sx + x;
+    sy = a.sy + y;
+    sz = a.sz + z;
+    xx = a.xx + x * x;
+    xy = a.xy + x * y;
+    xz = a.xz + x * z;
+    yy = a.yy + y * y;
+    yz = a.yz + y * z;
+    zz = a.zz + z * z;
+    wxx = a.wxx + w * (x * x);
+    wxy = a.wxy + w * (x * y);
+    wxz = a.wxz + w * (x * z);
+    wyy = a.wyy + w * (y * y);
+    wyz = a.wyz + w * (y * z);
+    wzz = a.wzz + w * (z * z);
+  }
   /// Sets W = w Q: the noise moment when every point has the same relative noise w.
   void SetUniformNoise(double w) {
     wxx = w * xx;

@@ -12,6 +12,9 @@ namespace planeslam::detection {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+/// How many members ahead in the growth queue PBRG prefetches a pixel's neighbourhood.
+constexpr std::size_t kGrowPrefetchAhead = 8;
 double Ms(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
 }
@@ -36,11 +39,18 @@ struct Seed {
 };
 
 /// A region while it grows: its index, moments, current plane and joins since the last refit.
+/// The moments with a tested point added are formed in the spare of two buffers, which becomes
+/// the region's on a join (no copy either way).
 struct Growth {
   int r = 0;
-  MomentSums region;
+  MomentSums sums[2];
+  int current = 0;
   FastFit fit;
   double since_refit = 0;
+
+  const MomentSums& Region() const { return sums[current]; }
+  MomentSums& Spare() { return sums[current ^ 1]; }
+  void TakeSpare() { current ^= 1; }
 };
 
 /// Outcome of the join test of one point.
@@ -96,7 +106,7 @@ class PbrgPass {
       if (!PlanarSeed(&seed)) continue;
       Growth g = StartRegion(seed);
       Grow(&g);
-      CloseRegion(g.region);
+      CloseRegion(g.Region());
     }
   }
 
@@ -148,7 +158,7 @@ class PbrgPass {
   Growth StartRegion(const Seed& seed) {
     Growth g;
     g.r = static_cast<int>(ws_.regions.size());
-    g.region = seed.region;
+    g.sums[0] = seed.region;
     g.fit = seed.fit;
     ws_.members.clear();
     ws_.members.push_back(static_cast<int>(seed.s));
@@ -160,24 +170,48 @@ class PbrgPass {
     return g;
   }
 
-  /// The 4-neighbour of pixel q in direction dir (right, left, down, up), -1 off the image.
-  int Neighbour(int q, int dir) const {
-    const int qx = q % width_, qy = q / width_;
-    if (dir == 0) return qx + 1 >= width_ ? -1 : q + 1;
-    if (dir == 1) return qx == 0 ? -1 : q - 1;
-    if (dir == 2) return qy + 1 >= height_ ? -1 : q + width_;
-    return qy == 0 ? -1 : q - width_;
-  }
-
-  /// Breadth-first growth over 4-neighbours (Algorithm 1 lines 7-12).
+  /// Breadth-first growth over 4-neighbours (Algorithm 1 lines 7-12), right, left, down, up.
   void Grow(Growth* g) {
     std::size_t head = 0;
+    const double inv_width = 1.0 / width_;
     while (head < ws_.members.size()) {
-      const int q = ws_.members[head++];
-      for (int dir = 0; dir < 4; ++dir) {
-        const int c = Neighbour(q, dir);
-        if (c >= 0) TryJoin(q, c, g);
+      // The wavefront of a large region spans more rows than the caches hold: the labels, noise
+      // and points around a member a few places ahead in the queue are fetched while this one
+      // is tested (the same data in the same order; only the waiting is gone).
+      if (head + kGrowPrefetchAhead < ws_.members.size()) {
+        Prefetch(ws_.members[head + kGrowPrefetchAhead]);
       }
+      const int q = ws_.members[head++];
+      // The pixel's row without an integer division: (q + 0.5) / width is at least 0.5 / width
+      // from an integer, far beyond the product's rounding.
+      const int qy = static_cast<int>((q + 0.5) * inv_width);
+      const int qx = q - qy * width_;
+      if (qx + 1 < width_) Consider(q, q + 1, g);
+      if (qx > 0) Consider(q, q - 1, g);
+      if (qy + 1 < height_) Consider(q, q + width_, g);
+      if (qy > 0) Consider(q, q - width_, g);
+    }
+  }
+
+  /// Neighbour c of region point q: most are in the region already, invalid, or in R' (left
+  /// PCD, Algorithm 1 line 3), told by three loads here; the others are tested by TryJoin.
+  void Consider(int q, int c, Growth* g) {
+    const int owner = ws_.labels[c];
+    if (owner == g->r || ws_.rel2[c] < 0) return;
+    if (owner < 0 && ws_.visited[c]) return;
+    TryJoin(q, c, owner, g);
+  }
+
+  /// Fetches what TryJoin reads of the 4-neighbours of pixel q (within the image's memory).
+  void Prefetch(int q) const {
+    const std::size_t n = n_;
+    for (const std::ptrdiff_t i : {static_cast<std::ptrdiff_t>(q) - width_,
+                                   static_cast<std::ptrdiff_t>(q) + width_}) {
+      if (i < 0 || static_cast<std::size_t>(i) >= n) continue;
+      __builtin_prefetch(&ws_.labels[i]);
+      __builtin_prefetch(&ws_.rel2[i]);
+      __builtin_prefetch(&ws_.visited[i]);
+      __builtin_prefetch(&pts_[i]);
     }
   }
 
@@ -202,8 +236,15 @@ class PbrgPass {
     return mse < params_.Epsilon(merged.EffectiveMse(normal, merged.NormalTilt(l2)), merged.k);
   }
 
+  /// The approximate join's distance test of point c (at pc) against region g's current plane.
+  /// Its bound is at least its cheap part, the base gamma: within that, no roots needed.
+  bool NearCurrentPlane(int c, const Eigen::Vector3d& pc, const Growth& g) const {
+    const double dist = std::abs(g.fit.normal.dot(pc) - g.fit.d);
+    return dist < params_.gamma || dist < GammaFor(g.fit, g.Region(), c, pc);
+  }
+
   /// The join test of point c (at pc) for region `g`, `merged` being g's moments with c added
-  /// (Algorithm 1 line 9).
+  /// (Algorithm 1 line 9). Between refits (refit_interval != 1), c has passed NearCurrentPlane.
   JoinTest TestJoin(int c, const Eigen::Vector3d& pc, const Growth& g,
                     const MomentSums& merged) const {
     JoinTest test;
@@ -218,11 +259,8 @@ class PbrgPass {
           MseWithinEpsilon(test.new_fit.mse, merged, test.new_fit.normal, test.new_fit.l2);
       return test;
     }
-    // Approximate distance test against the current plane; MSE bound about its normal. Each
-    // bound is at least its cheap part (the base gamma; epsilon of the noise along the normal
-    // alone, which the tilt term only raises): within that, no roots needed.
-    const double dist = std::abs(fit.normal.dot(pc) - fit.d);
-    if (dist >= params_.gamma && dist >= GammaFor(fit, g.region, c, pc)) return test;
+    // MSE bound about the current normal. The bound is at least its cheap part (epsilon of the
+    // noise along the normal alone, which the tilt term only raises): within that, no roots.
     if (MseAboutWithinEpsilon(merged, fit.normal, params_) ||
         MseWithinEpsilon(merged.MseAbout(fit.normal), merged, fit.normal, fit.l2)) {
       test.accept = true;
@@ -252,10 +290,11 @@ class PbrgPass {
     return true;
   }
 
-  /// Takes `merged` as the region's moments and updates its plane: the refitted one when the test
-  /// refitted, else a refit every refit_interval joins (adaptive: every max(1, K/64)).
-  void Advance(const MomentSums& merged, const JoinTest& test, Growth* g) const {
-    g->region = merged;
+  /// Takes the spare moments (the region with the point) as the region's and updates its plane:
+  /// the refitted one when the test refitted, else a refit every refit_interval joins (adaptive:
+  /// every max(1, K/64)).
+  void Advance(const JoinTest& test, Growth* g) const {
+    g->TakeSpare();
     g->since_refit += 1.0;
     if (test.refitted) {
       g->fit = test.new_fit;
@@ -263,31 +302,33 @@ class PbrgPass {
       return;
     }
     const int refit_interval = point_.refit_interval;
-    const double interval = refit_interval > 0 ? refit_interval : std::max(1.0, g->region.k / 64.0);
+    const double interval =
+        refit_interval > 0 ? refit_interval : std::max(1.0, g->Region().k / 64.0);
     if (g->since_refit >= interval) {
-      g->fit = RefitFrom(g->region, g->fit.normal);
+      g->fit = RefitFrom(g->Region(), g->fit.normal);
       g->since_refit = 0;
     }
   }
 
-  /// Tests neighbour c of region point q for region `g` and adds it when it joins.
-  void TryJoin(int q, int c, Growth* g) {
-    const int owner = ws_.labels[c];
-    if (owner == g->r || ws_.rel2[c] < 0) return;
-    if (owner < 0 && ws_.visited[c]) return;  // in R': left PCD (Algorithm 1 line 3)
+  /// Tests neighbour c of region point q (of region `owner`, -1: none) for region `g` and adds
+  /// it when it joins.
+  __attribute__((noinline)) void TryJoin(int q, int c, int owner, Growth* g) {
     const Eigen::Vector3f& pq = pts_[q];
     const Eigen::Vector3f& pcf = pts_[c];
     const double zc = internal::PointDepth(pcf, spherical_);
     const double delta_c = params_.Delta(zc);
     if ((pcf - pq).squaredNorm() >= delta_c * delta_c) return;  // dis(GR, p_c) < delta
     const Eigen::Vector3d pc = pcf.cast<double>();
-    MomentSums merged = g->region;
-    merged.Add(pc.x(), pc.y(), pc.z(), ws_.rel2[c]);
+    // Between refits the distance to the current plane turns most points away before their
+    // merged moments are formed.
+    if (point_.refit_interval != 1 && !NearCurrentPlane(c, pc, *g)) return;
+    MomentSums& merged = g->Spare();
+    merged.SetSum(g->Region(), pc.x(), pc.y(), pc.z(), ws_.rel2[c]);
     const JoinTest test = TestJoin(c, pc, *g, merged);
     if (!test.accept) return;
     if (owner >= 0 && !TakeJointPoint(c, pc, owner, test.refitted ? test.new_fit : g->fit, merged))
       return;
-    Advance(merged, test, g);
+    Advance(test, g);
     ws_.labels[c] = g->r;
     ws_.visited[c] = 1;
     ws_.members.push_back(c);
