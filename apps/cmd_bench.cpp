@@ -12,6 +12,7 @@
 
 #include "exit_codes.hpp"
 #include "bench_common.hpp"
+#include "bench_io.hpp"
 #include "bench_long_run.hpp"
 #include "bench_odometry.hpp"
 #include "bench_quality.hpp"
@@ -144,10 +145,19 @@ class BenchCommand : public Command {
                           "false closures injected into the built-in room, one run each");
     long_run_->add_option("--json", long_run_options_.json_path, "write the results as JSON");
     AddConfigOptions(*long_run_, long_run_config_);
+    io_ = sub.add_subcommand("io", "Input readers: PNG depth (libpng vs ours), KITTI .bin, PCD");
+    io_->add_option("--data", io_options_.data_dir, "shared data folder (default: as the tests)");
+    io_->add_option("--repeat", io_options_.repeat, "decodes per file, the median counts")
+        ->check(CLI::Range(1, 1000));
+    io_->add_option("--json", io_options_.json_path, "write the results as JSON");
   }
 
   int Run() override {
     if (detect_->parsed()) return quality_ ? RunQuality() : RunDetect();
+    if (io_->parsed()) {
+      if (io_options_.data_dir.empty()) io_options_.data_dir = bench::DataDir();
+      return bench::RunIoBench(io_options_);
+    }
     if (long_run_->parsed()) {
       long_run_options_.quiet = long_run_config_.quiet;
       return bench::RunLongRunBench(long_run_config_, long_run_options_);
@@ -399,6 +409,8 @@ class BenchCommand : public Command {
   CLI::App* detect_ = nullptr;
   CLI::App* odometry_ = nullptr;
   CLI::App* long_run_ = nullptr;
+  CLI::App* io_ = nullptr;
+  bench::IoBenchOptions io_options_;
   bench::LongRunOptions long_run_options_;
   ConfigOptions long_run_config_;
   // detect

@@ -152,17 +152,112 @@ class RelativePoseError {
     return true;
   }
 
-  static ceres::CostFunction* Create(const PoseGraphEdge& edge) {
-    // Upper factor U = L^T so that |U e|^2 = e^T L L^T e = e^T information e.
-    const Matrix6d sqrt_information = edge.information.llt().matrixU();
-    return new ceres::AutoDiffCostFunction<RelativePoseError, 6, 3, 4, 3, 4>(
-        new RelativePoseError(edge.translation, edge.rotation.normalized(), sqrt_information));
-  }
+  const Eigen::Vector3d& p_ab() const { return p_ab_; }
+  const Eigen::Quaterniond& q_ab() const { return q_ab_; }
+  const Matrix6d& sqrt_information() const { return sqrt_information_; }
 
  private:
   Eigen::Vector3d p_ab_;
   Eigen::Quaterniond q_ab_;
   Matrix6d sqrt_information_;
+};
+
+/// 4x4 matrices of quaternion products in Eigen's (x y z w) order: a * b = Left(a) b = Right(b) a.
+Eigen::Matrix4d QuaternionLeft(const Eigen::Quaterniond& a) {
+  const double x = a.x(), y = a.y(), z = a.z(), w = a.w();
+  Eigen::Matrix4d m;
+  m << w, -z, y, x,  //
+      z, w, -x, y,   //
+      -y, x, w, z,   //
+      -x, -y, -z, w;
+  return m;
+}
+
+Eigen::Matrix4d QuaternionRight(const Eigen::Quaterniond& b) {
+  const double x = b.x(), y = b.y(), z = b.z(), w = b.w();
+  Eigen::Matrix4d m;
+  m << w, z, -y, x,  //
+      -z, w, x, y,   //
+      y, -x, w, z,   //
+      -x, -y, -z, w;
+  return m;
+}
+
+Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d m;
+  m << 0.0, -v.z(), v.y(),  //
+      v.z(), 0.0, -v.x(),   //
+      -v.y(), v.x(), 0.0;
+  return m;
+}
+
+/// RelativePoseError with analytic Jacobians (the pose graph's hot loop). The residual is
+/// evaluated by the same code as the automatic version; the Jacobians are its exact derivatives
+/// in the ambient quaternion coordinates:
+///   rotation: dq = q_ab * conj(q_b) * q_a is bilinear, d dq/d q_a = Left(q_ab * conj(q_b)),
+///             d dq/d q_b = Left(q_ab) Right(q_a) diag(-1, -1, -1, 1);
+///   position: with u = vec(q_a), w = q_a.w, t = p_b - p_a, Eigen rotates by conj(q_a) as
+///             f = t - 2w (u x t) + 2 u x (u x t), so df/dt = I - 2w [u]x + 2 [u]x^2,
+///             df/dw = -2 (u x t), df/du = 2w [t]x + 2 ((u.t) I + u t^T - 2 t u^T).
+class RelativePoseCost final : public ceres::SizedCostFunction<6, 3, 4, 3, 4> {
+ public:
+  explicit RelativePoseCost(const RelativePoseError& error) : error_(error) {}
+
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override {
+    error_(parameters[0], parameters[1], parameters[2], parameters[3], residuals);
+    if (jacobians == nullptr) return true;
+    using RowMajor63 = Eigen::Matrix<double, 6, 3, Eigen::RowMajor>;
+    using RowMajor64 = Eigen::Matrix<double, 6, 4, Eigen::RowMajor>;
+    const Matrix6d& U = error_.sqrt_information();
+    const Eigen::Map<const Eigen::Vector3d> p_a(parameters[0]);
+    const Eigen::Map<const Eigen::Quaterniond> q_a(parameters[1]);
+    const Eigen::Map<const Eigen::Vector3d> p_b(parameters[2]);
+    const Eigen::Map<const Eigen::Quaterniond> q_b(parameters[3]);
+    const Eigen::Vector3d u = q_a.vec();
+    const double w = q_a.w();
+    const Eigen::Vector3d t = p_b - p_a;
+    const Eigen::Matrix3d su = Skew(u);
+    const Eigen::Matrix3d dt = Eigen::Matrix3d::Identity() - 2.0 * w * su + 2.0 * su * su;
+    if (jacobians[0] != nullptr) {
+      Eigen::Map<RowMajor63> j(jacobians[0]);
+      j = -U.leftCols<3>() * dt;
+    }
+    if (jacobians[2] != nullptr) {
+      Eigen::Map<RowMajor63> j(jacobians[2]);
+      j = U.leftCols<3>() * dt;
+    }
+    if (jacobians[1] != nullptr) {
+      Eigen::Matrix<double, 6, 4> e;
+      e.topLeftCorner<3, 3>() = 2.0 * w * Skew(t) + 2.0 * (u.dot(t) * Eigen::Matrix3d::Identity() +
+                                                           u * t.transpose() - 2.0 * t * u.transpose());
+      e.topRightCorner<3, 1>() = -2.0 * u.cross(t);
+      const Eigen::Quaterniond q_ab_qb_inv = error_.q_ab() * q_b.conjugate();
+      e.bottomRows<3>() = 2.0 * QuaternionLeft(q_ab_qb_inv).topRows<3>();
+      Eigen::Map<RowMajor64> j(jacobians[1]);
+      j = U * e;
+    }
+    if (jacobians[3] != nullptr) {
+      Eigen::Matrix<double, 6, 4> e;
+      e.topRows<3>().setZero();
+      Eigen::Matrix4d m = QuaternionLeft(error_.q_ab()) * QuaternionRight(q_a);
+      m.leftCols<3>() = -m.leftCols<3>();
+      e.bottomRows<3>() = 2.0 * m.topRows<3>();
+      Eigen::Map<RowMajor64> j(jacobians[3]);
+      j = U.rightCols<3>() * e.bottomRows<3>();
+    }
+    return true;
+  }
+
+  static ceres::CostFunction* Create(const PoseGraphEdge& edge) {
+    // Upper factor U = L^T so that |U e|^2 = e^T L L^T e = e^T information e.
+    const Matrix6d sqrt_information = edge.information.llt().matrixU();
+    const RelativePoseError error(edge.translation, edge.rotation.normalized(), sqrt_information);
+    return new RelativePoseCost(error);
+  }
+
+ private:
+  RelativePoseError error_;
 };
 
 /// A node's observation of a plane landmark: residual (R^T n_w - n_obs) / sigma_n (3, of which
@@ -261,7 +356,7 @@ BuiltProblem BuildProblem(const PoseGraph& graph, const PoseGraphConfig& config,
     const std::size_t b = index.at(edge.to);
     ceres::LossFunction* loss = edge.kind == EdgeKind::kLoopClosure ? loop_loss : nullptr;
     loss_used |= loss != nullptr;
-    problem.AddResidualBlock(RelativePoseError::Create(edge), loss, built.positions[a].data(),
+    problem.AddResidualBlock(RelativePoseCost::Create(edge), loss, built.positions[a].data(),
                              built.rotations[a].coeffs().data(), built.positions[b].data(),
                              built.rotations[b].coeffs().data());
   }
@@ -390,7 +485,7 @@ double PoseGraphCost(const PoseGraph& graph, const PoseGraphConfig& config) {
 EdgeResidualEvaluation EvaluateEdgeResidual(const PoseGraphEdge& edge,
                                             const Eigen::Matrix<double, 7, 1>& x_a,
                                             const Eigen::Matrix<double, 7, 1>& x_b) {
-  std::unique_ptr<ceres::CostFunction> cost(RelativePoseError::Create(edge));
+  std::unique_ptr<ceres::CostFunction> cost(RelativePoseCost::Create(edge));
   const Eigen::Matrix<double, 7, 1> a = x_a;
   const Eigen::Matrix<double, 7, 1> b = x_b;
   const double* parameters[4] = {a.data(), a.data() + 3, b.data(), b.data() + 3};

@@ -1,6 +1,7 @@
 #include "planeslam/datasets/image_io.hpp"
 
 #include <png.h>
+#include <libdeflate.h>
 
 #include <algorithm>
 #include <cmath>
@@ -111,10 +112,189 @@ Image16 ReadPng16(const std::string& path) {
   return DecodePng16(detail::ReadWholeFile(path, detail::MaxInputFileBytes()), path);
 }
 
-Image16 DecodePng16(const std::string& bytes, const std::string& path) {
-  if (bytes.size() < 8 || png_sig_cmp(reinterpret_cast<png_const_bytep>(bytes.data()), 0, 8) != 0) {
-    throw IoError(path, "not a PNG file");
+namespace {
+
+bool IsPngSignature(const std::string& bytes) {
+  return bytes.size() >= 8 &&
+         png_sig_cmp(reinterpret_cast<png_const_bytep>(bytes.data()), 0, 8) == 0;
+}
+
+bool SizeWithinLimits(std::uint32_t width, std::uint32_t height) {
+  const InputLimits& limits = GlobalInputLimits();
+  return width > 0 && height > 0 && width <= limits.max_side && height <= limits.max_side &&
+         static_cast<std::int64_t>(width) * height <= limits.max_pixels;
+}
+
+void CheckPngHeader(std::uint32_t width, std::uint32_t height, int color_type,
+                    const std::string& path) {
+  if (!SizeWithinLimits(width, height)) {
+    throw IoError(path, "image size " + std::to_string(width) + "x" + std::to_string(height) +
+                            " is empty or exceeds the input limits");
   }
+  if (color_type != PNG_COLOR_TYPE_GRAY) {
+    throw IoError(path, "expected a single-channel (grey) PNG, got colour type " +
+                            std::to_string(color_type));
+  }
+}
+
+std::uint32_t BigEndian32(const unsigned char* p) {
+  return (std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) | (std::uint32_t{p[2]} << 8) |
+         p[3];
+}
+
+/// Per-thread libdeflate decompressor and scratch buffers (frames are decoded on reader threads).
+struct InflateScratch {
+  libdeflate_decompressor* d = libdeflate_alloc_decompressor();
+  std::vector<unsigned char> idat;      // the concatenated IDAT payload
+  std::vector<unsigned char> filtered;  // the zlib stream inflated: filter byte + row, per row
+  ~InflateScratch() { libdeflate_free_decompressor(d); }
+};
+
+/// Undoes the PNG row filters (PNG spec, section 9) in place, bpp bytes per pixel, and stores
+/// the samples (big-endian in the file) in `image`. Sub, the filter depth cameras use, keeps the
+/// running pixel in registers.
+template <int bpp>
+bool UnfilterRows(unsigned char* data, std::size_t rows, std::size_t width, Image16* image) {
+  const std::size_t row_bytes = width * bpp;
+  const unsigned char* prior = nullptr;
+  std::uint16_t* out = image->data.data();
+  for (std::size_t r = 0; r < rows; ++r, out += width) {
+    const unsigned char filter = data[0];
+    unsigned char* x = data + 1;
+    switch (filter) {
+      case 0:
+        break;
+      case 1: {
+        // The unfiltered bytes are written back only when the next row refers to them.
+        const bool keep = r + 1 < rows && x[row_bytes] >= 2;
+        unsigned char a0 = 0, a1 = 0;
+        for (std::size_t c = 0; c < width; ++c) {
+          a0 = static_cast<unsigned char>(a0 + x[bpp * c]);
+          if constexpr (bpp == 2) {
+            a1 = static_cast<unsigned char>(a1 + x[2 * c + 1]);
+            out[c] = static_cast<std::uint16_t>((a0 << 8) | a1);
+          } else {
+            out[c] = a0;
+          }
+          if (keep) {
+            x[bpp * c] = a0;
+            if constexpr (bpp == 2) x[2 * c + 1] = a1;
+          }
+        }
+        prior = x;
+        data += row_bytes + 1;
+        continue;
+      }
+      case 2:
+        if (prior) {
+          for (std::size_t i = 0; i < row_bytes; ++i) {
+            x[i] = static_cast<unsigned char>(x[i] + prior[i]);
+          }
+        }
+        break;
+      case 3:
+        for (std::size_t i = 0; i < row_bytes; ++i) {
+          const unsigned a = i >= bpp ? x[i - bpp] : 0u, b = prior ? prior[i] : 0u;
+          x[i] = static_cast<unsigned char>(x[i] + ((a + b) >> 1));
+        }
+        break;
+      case 4:
+        for (std::size_t i = 0; i < row_bytes; ++i) {
+          const int a = i >= bpp ? x[i - bpp] : 0, b = prior ? prior[i] : 0,
+                    c = (i >= bpp && prior) ? prior[i - bpp] : 0;
+          const int p = a + b - c, pa = std::abs(p - a), pb = std::abs(p - b), pc = std::abs(p - c);
+          const int pred = (pa <= pb && pa <= pc) ? a : (pb <= pc ? b : c);
+          x[i] = static_cast<unsigned char>(x[i] + pred);
+        }
+        break;
+      default:
+        return false;
+    }
+    for (std::size_t c = 0; c < width; ++c) {
+      out[c] = bpp == 2 ? static_cast<std::uint16_t>((x[2 * c] << 8) | x[2 * c + 1]) : x[c];
+    }
+    prior = x;
+    data += row_bytes + 1;
+  }
+  return true;
+}
+
+/// libdeflate decode of the files depth cameras and planeslam write: grey, 8 or 16 bits, not
+/// interlaced, chunks IHDR, IDAT..., IEND only, CRCs and the zlib stream (32 KiB window, Adler-32)
+/// exactly consistent. False for anything else, which the caller hands to libpng (its verdict,
+/// its message), so accepted files and pixels are libpng's.
+bool DecodeGreyWithLibdeflate(const std::string& bytes, Image16* image) {
+  thread_local InflateScratch scratch;
+  if (scratch.d == nullptr) return false;
+  const auto* p = reinterpret_cast<const unsigned char*>(bytes.data());
+  const std::size_t size = bytes.size();
+  std::size_t pos = 8;
+  std::uint32_t width = 0, height = 0;
+  int bit_depth = 0;
+  scratch.idat.clear();
+  enum { kHeader, kData } stage = kHeader;  // IHDR first; only IDAT, then one IEND, follow
+  bool ended = false;
+  while (!ended) {
+    if (size - pos < 12) return false;
+    const std::uint32_t length = BigEndian32(p + pos);
+    if (length > 0x7fffffffu || length > size - pos - 12) return false;
+    const unsigned char* type = p + pos + 4;
+    const unsigned char* body = type + 4;
+    if (libdeflate_crc32(0, type, length + 4) != BigEndian32(body + length)) return false;
+    if (std::memcmp(type, "IHDR", 4) == 0) {
+      if (stage != kHeader || pos != 8 || length != 13) return false;
+      width = BigEndian32(body);
+      height = BigEndian32(body + 4);
+      bit_depth = body[8];
+      // colour type grey, compression 0, filter 0, no interlacing
+      if ((bit_depth != 8 && bit_depth != 16) || body[9] != 0 || body[10] != 0 || body[11] != 0 ||
+          body[12] != 0 || !SizeWithinLimits(width, height)) {
+        return false;
+      }
+      stage = kData;
+    } else if (std::memcmp(type, "IDAT", 4) == 0) {
+      if (stage != kData) return false;
+      scratch.idat.insert(scratch.idat.end(), body, body + length);
+    } else if (std::memcmp(type, "IEND", 4) == 0) {
+      if (stage != kData || scratch.idat.empty() || length != 0) return false;
+      ended = true;
+    } else {
+      return false;
+    }
+    pos += std::size_t{length} + 12;
+  }
+  const std::size_t bpp = bit_depth / 8;
+  const std::size_t row_bytes = std::size_t{width} * bpp;
+  const std::size_t inflated = std::size_t{height} * (row_bytes + 1);
+  // zlib header: deflate with a 32 KiB window (CINFO 7). Smaller windows make zlib refuse
+  // distances libdeflate would accept, so those files go to libpng.
+  if (scratch.idat.size() < 2 || (scratch.idat[0] & 0xf0) != 0x70) return false;
+  scratch.filtered.resize(inflated);
+  std::size_t consumed = 0;
+  if (libdeflate_zlib_decompress_ex(scratch.d, scratch.idat.data(), scratch.idat.size(),
+                                    scratch.filtered.data(), inflated, &consumed,
+                                    nullptr) != LIBDEFLATE_SUCCESS ||
+      consumed != scratch.idat.size()) {
+    return false;
+  }
+  *image = Image16(static_cast<int>(width), static_cast<int>(height));
+  const bool ok = bpp == 2 ? UnfilterRows<2>(scratch.filtered.data(), height, width, image)
+                           : UnfilterRows<1>(scratch.filtered.data(), height, width, image);
+  if (!ok) return false;
+  return true;
+}
+
+}  // namespace
+
+Image16 DecodePng16(const std::string& bytes, const std::string& path) {
+  if (!IsPngSignature(bytes)) throw IoError(path, "not a PNG file");
+  Image16 image;
+  if (DecodeGreyWithLibdeflate(bytes, &image)) return image;
+  return DecodePng16WithLibpng(bytes, path);
+}
+
+Image16 DecodePng16WithLibpng(const std::string& bytes, const std::string& path) {
+  if (!IsPngSignature(bytes)) throw IoError(path, "not a PNG file");
   MemorySource source;
   source.data = reinterpret_cast<const unsigned char*>(bytes.data());
   source.size = bytes.size();
@@ -125,7 +305,6 @@ Image16 DecodePng16(const std::string& bytes, const std::string& path) {
   if (!handles.png) throw IoError(path, "cannot initialise libpng");
   handles.info = png_create_info_struct(handles.png);
   if (!handles.info) throw IoError(path, "cannot initialise libpng");
-  const InputLimits& limits = GlobalInputLimits();
   // Let libpng accept any header size the format allows (its default stops at 10^6 px a side with
   // a cryptic message); our own limits below refuse it by name before anything is allocated.
   png_set_user_limits(handles.png, 0x7fffffffU, 0x7fffffffU);
@@ -133,15 +312,7 @@ Image16 DecodePng16(const std::string& bytes, const std::string& path) {
   if (!ReadPngHeader(handles.png, handles.info, &source, &h)) {
     throw IoError(path, "corrupt or truncated PNG (" + state.message + ")");
   }
-  if (h.width == 0 || h.height == 0 || h.width > limits.max_side || h.height > limits.max_side ||
-      static_cast<std::int64_t>(h.width) * h.height > limits.max_pixels) {
-    throw IoError(path, "image size " + std::to_string(h.width) + "x" + std::to_string(h.height) +
-                            " is empty or exceeds the input limits");
-  }
-  if (h.color_type != PNG_COLOR_TYPE_GRAY) {
-    throw IoError(path, "expected a single-channel (grey) PNG, got colour type " +
-                            std::to_string(h.color_type));
-  }
+  CheckPngHeader(h.width, h.height, h.color_type, path);
   Image16 image(static_cast<int>(h.width), static_cast<int>(h.height));
   std::vector<png_byte> bytes8;  // 8-bit (or less) images are widened after reading
   std::vector<png_bytep> rows(h.height);

@@ -156,6 +156,12 @@ struct Hit {
   int prim = -1;
 };
 
+/// Whether a hit at s on primitive `index` beats `hit`: nearer, or as near and listed earlier. The
+/// tie rule makes the result the same whatever order the primitives are cast in.
+inline bool Nearer(double s, int index, const Hit& hit) {
+  return s < hit.s || (s == hit.s && index < hit.prim);
+}
+
 /// Tests ray D (ray parameter s, hit point s * D) against p; updates `hit` when nearer.
 inline void Intersect(const Primitive& p, int index, const Vector3d& D, double D2, Hit& hit) {
   switch (p.kind) {
@@ -163,7 +169,7 @@ inline void Intersect(const Primitive& p, int index, const Vector3d& D, double D
       const double denom = p.n.dot(D);
       if (denom == 0.0) return;
       const double s = p.d / denom;
-      if (!(s > 0.0 && s < hit.s)) return;
+      if (!(s > 0.0 && Nearer(s, index, hit))) return;
       const Vector3d q = s * D;
       for (std::size_t i = 0; i < p.edge_n.size(); ++i) {
         if (p.edge_n[i].dot(q) < p.edge_b[i]) return;
@@ -176,7 +182,7 @@ inline void Intersect(const Primitive& p, int index, const Vector3d& D, double D
       const double denom = p.n.dot(D);
       if (denom == 0.0) return;
       const double s = p.d / denom;
-      if (!(s > 0.0 && s < hit.s)) return;
+      if (!(s > 0.0 && Nearer(s, index, hit))) return;
       if ((s * D - p.c).squaredNorm() > p.r * p.r) return;
       hit.s = s;
       hit.prim = index;
@@ -190,7 +196,7 @@ inline void Intersect(const Primitive& p, int index, const Vector3d& D, double D
       const double sq = std::sqrt(disc);
       double s = (b - sq) / D2;
       if (s <= 0.0) s = (b + sq) / D2;
-      if (s > 0.0 && s < hit.s) {
+      if (s > 0.0 && Nearer(s, index, hit)) {
         hit.s = s;
         hit.prim = index;
       }
@@ -208,7 +214,7 @@ inline void Intersect(const Primitive& p, int index, const Vector3d& D, double D
       const double sq = std::sqrt(disc);
       for (double s : {(-B - sq) / A, (-B + sq) / A}) {
         if (s <= 0.0) continue;
-        if (s >= hit.s) return;
+        if (!Nearer(s, index, hit)) return;
         const double h = wa + s * da;
         if (h < 0.0 || h > p.length) continue;
         hit.s = s;
@@ -270,11 +276,19 @@ class CasterBase : public SyntheticSensor {
     local.reserve(prims_.size());
     for (const Primitive& p : prims_) local.push_back(Transform(p, T_sensor_world));
     hits.assign(rays_.size(), Hit{});
+    // Nearest first, so that pixels already hit in front skip the inside tests of what is behind
+    // (the nearest hit does not depend on the order, see Nearer()).
+    thread_local std::vector<std::pair<double, std::size_t>> order;
+    order.clear();
     for (std::size_t k = 0; k < local.size(); ++k) {
+      order.emplace_back(local[k].bs_center.norm() - local[k].bs_radius, k);
+    }
+    std::sort(order.begin(), order.end());
+    for (const auto& [nearest, k] : order) {
       const Primitive& p = local[k];
       // Everything this primitive could show is beyond range: skip. The range of a hit is
       // s * |D| <= s * max_ray_norm_, so s > max_s whenever range > max_s * max_ray_norm_.
-      if (p.bs_center.norm() - p.bs_radius > max_s * max_ray_norm_) continue;
+      if (nearest > max_s * max_ray_norm_) continue;
       const PixelBox box = Cull(p);
       if (FastLoop(p, static_cast<int>(k), box, hits)) continue;
       for (int r = box.r0; r <= box.r1; ++r) {
@@ -336,7 +350,7 @@ class PinholeCaster final : public CasterBase {
         if (den == 0.0) continue;
         const double s = p.d / den;
         Hit& h = row_hits[c];
-        if (!(s > 0.0 && s < h.s)) continue;
+        if (!(s > 0.0 && Nearer(s, index, h))) continue;
         bool inside = true;
         for (std::size_t e = 0; e < m && inside; ++e) {
           inside = s * (p.edge_n[e].x() * x + row_term[e]) >= p.edge_b[e];
@@ -396,7 +410,7 @@ class PinholeCaster final : public CasterBase {
           }
         }
       }
-      for (std::size_t i = 0; i < hits.size(); ++i) valid[i] = valid[i] && !edge[i];
+      for (std::size_t i = 0; i < hits.size(); ++i) valid[i] &= static_cast<char>(!edge[i]);
     }
     // Measurements: noise along the ray on depth, optional disparity quantisation.
     SplitMixRandom rng(noise_seed);

@@ -1,5 +1,7 @@
 #pragma once
-/// PNG images in and out (libpng). Reads validate size and bit depth and throw IoError naming the
+/// PNG images in and out. Reads take the grey 8/16-bit files cameras write through libdeflate and
+/// everything else (and every file that path does not accept) through libpng, whose verdict and
+/// messages stand. Reads validate size and bit depth and throw IoError naming the
 /// file; writes go to a temporary name and are renamed into place (no half-written files).
 #include <array>
 #include <cstdint>
@@ -32,6 +34,9 @@ Image16 ReadPng16(const std::string& path);
 /// Decodes a PNG held in memory (as ReadPng16; `name` is used in messages). For fuzzing and for
 /// callers that already hold the bytes.
 Image16 DecodePng16(const std::string& bytes, const std::string& name);
+/// The same decode with libpng alone: pixel for pixel what DecodePng16 gives (tests and
+/// `planeslam bench io` compare the two).
+Image16 DecodePng16WithLibpng(const std::string& bytes, const std::string& name);
 /// Writes a 16-bit grey PNG atomically.
 void WritePng16(const std::string& path, const Image16& image);
 /// Writes an 8-bit RGB PNG atomically.
