@@ -108,6 +108,10 @@ void SlamSystem::SearchLoopClosures(const Keyframe& current, SlamFrameResult* re
       ++stats_.loop_refused_residual;
       continue;
     }
+    if (AmbiguousClosure(old, current, prior, reg)) {
+      ++stats_.loop_refused_ambiguous;
+      continue;
+    }
     LoopClosureRecord record;
     record.from_keyframe = old.id;
     record.to_keyframe = current.id;
@@ -117,6 +121,39 @@ void SlamSystem::SearchLoopClosures(const Keyframe& current, SlamFrameResult* re
     record.covariance = reg.covariance;
     ProposeClosure(std::move(record), result);
   }
+}
+
+bool SlamSystem::AmbiguousClosure(const Keyframe& old, const Keyframe& current,
+                                  const registration::MotionPrior& prior,
+                                  const registration::RegistrationResult& reg) const {
+  // The registration above is anchored on the estimate: its offset gate admits only partners
+  // within a few decimetres of where the drifted trajectory puts them, so after a drift along a
+  // wall a parallel face in front of the wall (a cabinet) can be the only partner left, and the
+  // wrong closure then agrees with the drifted trajectory. The same planes are associated again
+  // without that anchor (offsets gated only by the search radius, no preference for the
+  // prior); a second well-determined solution that differs from the first beyond the two
+  // covariances means the planes do not single out one relative pose, and the closure is
+  // refused rather than trusted to the prior.
+  registration::AssociationConfig free_config = association_config_;
+  free_config.max_offset_difference =
+      std::max(association_config_.max_offset_difference, config_.loop_search_radius);
+  free_config.prior_gate_chi2 = 0.0;
+  registration::MotionPrior free_prior = prior;
+  free_prior.covariance =
+      DiagonalCovariance(config_.loop_search_radius, config_.loop_prior_rotation_sigma);
+  const registration::RegistrationResult alternative =
+      registration::AssociatePlanes(old.planes, current.planes, free_prior, free_config,
+                                    registration_config_)
+          .registration;
+  const bool well_determined =
+      alternative.converged && !alternative.degenerate &&
+      static_cast<int>(alternative.inliers.size()) >= config_.loop_min_matches &&
+      alternative.residual_rms < config_.loop_max_residual;
+  if (!well_determined) return false;
+  const Vector6d difference = registration::BoxMinus(alternative.T_prev_curr, reg.T_prev_curr);
+  const Matrix6d covariance = reg.covariance + alternative.covariance;
+  const double chi2 = difference.dot(InformationFromCovariance(covariance) * difference);
+  return chi2 > config_.loop_consistency_chi2;
 }
 
 void SlamSystem::InjectFalseClosures(const Keyframe& current, SlamFrameResult* result) {

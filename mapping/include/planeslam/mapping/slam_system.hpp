@@ -197,6 +197,8 @@ struct SlamStats {
   std::size_t loop_refused_degenerate = 0;
   std::size_t loop_refused_matches = 0;
   std::size_t loop_refused_residual = 0;
+  /// Candidates whose planes also fit a different relative pose equally well (AmbiguousClosure).
+  std::size_t loop_refused_ambiguous = 0;
   std::size_t closures_rejected = 0;   ///< hypotheses rejected (inconsistent or unsupported)
   std::size_t closures_retracted = 0;  ///< accepted, then outliers of the optimisation
   std::size_t closures_injected = 0;   ///< test-hook false closures offered
@@ -273,6 +275,11 @@ class SlamSystem {
                    const datasets::OrganizedCloud& cloud);
   /// Verifies the loop candidates of the new keyframe; the verified ones become hypotheses.
   void SearchLoopClosures(const Keyframe& current, SlamFrameResult* result);
+  /// Whether the planes of a verified candidate, associated again without the estimate's anchor,
+  /// also fit a different relative pose.
+  bool AmbiguousClosure(const Keyframe& old, const Keyframe& current,
+                        const registration::MotionPrior& prior,
+                        const registration::RegistrationResult& reg) const;
   /// The planned false closures of the test hook for this keyframe.
   void InjectFalseClosures(const Keyframe& current, SlamFrameResult* result);
   /// New hypothesis: tested against the trajectory estimate, then pending or rejected.
