@@ -186,7 +186,65 @@ void SlamSystem::InjectFalseClosures(const Keyframe& current, SlamFrameResult* r
   }
 }
 
+void SlamSystem::CountSharedPlanes(LoopClosureRecord* record) const {
+  // Map planes observed from both keyframes: the closure maps the old keyframe's detection of
+  // each onto the new keyframe's (n_to = R^T n_from, d_to = d_from - n_from . t). They tie the two
+  // keyframes through the plane landmarks, which the chain covariances of the consistency tests
+  // know nothing of: a degenerate stretch of odometry leaves those loose, while the walls both
+  // keyframes see fix the relative pose to millimetres.
+  const auto detection = [&](std::int64_t keyframe, int detection_id) -> const detection::Plane* {
+    const auto& planes = keyframes_[static_cast<std::size_t>(keyframe)].planes;
+    const int k = detection_id - 1;
+    return k >= 0 && k < static_cast<int>(planes.size()) ? &planes[static_cast<std::size_t>(k)]
+                                                         : nullptr;
+  };
+  const Eigen::Matrix3d R = record->T_from_to.linear();
+  const Eigen::Vector3d t = record->T_from_to.translation();
+  const Eigen::Matrix3d translation_cov = record->covariance.topLeftCorner<3, 3>();
+  const double rotation_var = record->covariance.bottomRightCorner<3, 3>().trace() / 3.0;
+  record->shared_planes = record->shared_agreeing = 0;
+  for (const MapPlane& plane : map_.planes()) {
+    const detection::Plane* from = nullptr;
+    const detection::Plane* to = nullptr;
+    for (const PlaneObservation& obs : plane.observations) {
+      if (obs.keyframe_id == record->from_keyframe && !from) {
+        from = detection(obs.keyframe_id, obs.detection_id);
+      } else if (obs.keyframe_id == record->to_keyframe && !to) {
+        to = detection(obs.keyframe_id, obs.detection_id);
+      }
+    }
+    if (!from || !to) continue;
+    ++record->shared_planes;
+    const Eigen::Vector3d n_predicted = R.transpose() * from->normal;
+    const double d_predicted = from->d - from->normal.dot(t);
+    const double angle = std::acos(std::clamp(n_predicted.dot(to->normal), -1.0, 1.0));
+    // Variances: the landmark floors, both detections' own, the closure's along the plane.
+    const double angle_var = config_.landmark_normal_sigma * config_.landmark_normal_sigma +
+                             0.5 * (from->covariance.topLeftCorner<3, 3>().trace() +
+                                    to->covariance.topLeftCorner<3, 3>().trace()) +
+                             rotation_var;
+    const double offset_var = config_.landmark_offset_sigma * config_.landmark_offset_sigma +
+                              from->covariance(3, 3) + to->covariance(3, 3) +
+                              from->normal.dot(translation_cov * from->normal);
+    const double offset = d_predicted - to->d;
+    const double chi2 = angle * angle / angle_var + offset * offset / offset_var;
+    if (chi2 <= association_config_.inlier_chi2) ++record->shared_agreeing;
+  }
+}
+
 void SlamSystem::ProposeClosure(LoopClosureRecord record, SlamFrameResult* result) {
+  record.decided_frame = record.to_frame;
+  CountSharedPlanes(&record);
+  if (2 * record.shared_agreeing < record.shared_planes) {
+    record.status = ClosureStatus::kRejected;
+    record.reason = "contradicted by the map planes both keyframes see (" +
+                    std::to_string(record.shared_planes - record.shared_agreeing) + " of " +
+                    std::to_string(record.shared_planes) + ")";
+    ++stats_.closures_rejected;
+    ++result->closures_rejected;
+    closures_.push_back(std::move(record));
+    return;
+  }
   // The estimate's relative pose with the uncertainty of the best chain of edges between the two
   // keyframes; without a short chain, the drift the loop search assumes.
   const Pose T_estimate =
@@ -199,7 +257,6 @@ void SlamSystem::ProposeClosure(LoopClosureRecord record, SlamFrameResult* resul
   const UncertainPose deviation =
       Compose(Invert(estimate), UncertainPose{record.T_from_to, record.covariance});
   record.chi2_trajectory = IdentityChi2(deviation);
-  record.decided_frame = record.to_frame;
   if (!(record.chi2_trajectory <= config_.loop_consistency_chi2)) {
     record.status = ClosureStatus::kRejected;
     record.reason = Format("inconsistent with the trajectory: chi2 ", record.chi2_trajectory);
@@ -266,7 +323,10 @@ int SlamSystem::DecideClosures(std::int64_t current_id, SlamFrameResult* result)
     const std::size_t index = window[k];
     LoopClosureRecord& record = closures_[index];
     if (record.status != ClosureStatus::kPending) continue;
-    if (in_clique[k] && support >= config_.loop_min_support) {
+    // Keyframes that share no map plane have nothing but the clique to vouch for the closure:
+    // it needs one more member.
+    const int needed = config_.loop_min_support + (record.shared_planes == 0 ? 1 : 0);
+    if (in_clique[k] && support >= needed) {
       record.status = ClosureStatus::kAccepted;
       record.support = support;
       record.reason = "in the largest consistent set (" + std::to_string(support) + ")";

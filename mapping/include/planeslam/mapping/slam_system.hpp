@@ -180,6 +180,11 @@ struct LoopClosureRecord {
   double chi2_trajectory = 0.0;
   double chi2_residual = 0.0;  ///< whitened residual^2 after the last optimisation (accepted)
   int support = 0;             ///< size of the consistent set that accepted it
+  /// Map planes observed from both keyframes, and how many of them the measured relative pose
+  /// maps onto each other (a closure most of them contradict is rejected; one with none needs
+  /// one more member in its consistent set).
+  int shared_planes = 0;
+  int shared_agreeing = 0;
   ClosureStatus status = ClosureStatus::kPending;
   std::string reason;          ///< why accepted, rejected or retracted
   bool injected = false;       ///< a test-hook false closure
@@ -282,7 +287,10 @@ class SlamSystem {
                         const registration::RegistrationResult& reg) const;
   /// The planned false closures of the test hook for this keyframe.
   void InjectFalseClosures(const Keyframe& current, SlamFrameResult* result);
-  /// New hypothesis: tested against the trajectory estimate, then pending or rejected.
+  /// Counts the map planes both keyframes of a closure see and those the closure agrees with.
+  void CountSharedPlanes(LoopClosureRecord* record) const;
+  /// New hypothesis: tested against the shared map planes and the trajectory estimate, then
+  /// pending or rejected.
   void ProposeClosure(LoopClosureRecord record, SlamFrameResult* result);
   /// PCM decision over the window; adds the accepted closures' edges. Returns how many.
   int DecideClosures(std::int64_t current_id, SlamFrameResult* result);
