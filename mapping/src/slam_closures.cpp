@@ -15,7 +15,7 @@ using namespace slam_internal;  // NOLINT: the helpers shared with slam_system.c
 
 namespace {
 
-constexpr std::uint64_t kInjectionSeed = 0x5eed'c105'0001ULL;
+constexpr std::uint64_t kInjectionSeed = 0x5eed'c105'0000ULL;
 
 /// Uniform in [0, 1) from 53 random bits (independent of the standard library's distributions).
 double Uniform(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
@@ -50,11 +50,16 @@ const char* ClosureStatusName(ClosureStatus status) {
   return "unknown";
 }
 
+std::uint64_t SlamSystem::InjectionSeed() const {
+  // Seed 1 gives the draws the hook has always made; others shift the stream far apart.
+  return kInjectionSeed + 1 + (static_cast<std::uint64_t>(config_.inject_seed) - 1) * 0x10000ULL;
+}
+
 void SlamSystem::PlanRun(std::size_t frames) {
   injection_frames_.clear();
   next_injection_ = 0;
   if (config_.inject_false_closures <= 0 || frames == 0) return;
-  std::mt19937_64 rng(kInjectionSeed);
+  std::mt19937_64 rng(InjectionSeed());
   for (int k = 0; k < config_.inject_false_closures; ++k) {
     injection_frames_.push_back(static_cast<std::size_t>(Uniform(rng) * frames));
   }
@@ -91,27 +96,26 @@ void SlamSystem::SearchLoopClosures(const Keyframe& current, SlamFrameResult* re
     prior.T_prev_curr = KeyframePose(old.id).inverse() * T_world_current;
     prior.covariance =
         DiagonalCovariance(config_.loop_prior_translation_sigma, config_.loop_prior_rotation_sigma);
-    const registration::AssociationResult association = registration::AssociatePlanes(
-        old.planes, current.planes, prior, association_config_, registration_config_);
-    const registration::RegistrationResult& reg = association.registration;
-    // Only a closure the planes fully determine may correct the trajectory: a degenerate one
-    // would carry the (drifted) prior into the graph as if it were a measurement.
-    if (!reg.converged || reg.degenerate) {
-      ++stats_.loop_refused_degenerate;
+    const registration::RegistrationResult anchored =
+        registration::AssociatePlanes(old.planes, current.planes, prior, association_config_,
+                                      registration_config_)
+            .registration;
+    const int fault = VerificationFault(anchored);
+    if (fault != 0) {
+      ++(fault == 1 ? stats_.loop_refused_degenerate
+                    : fault == 2 ? stats_.loop_refused_matches : stats_.loop_refused_residual);
       continue;
     }
-    if (static_cast<int>(reg.inliers.size()) < config_.loop_min_matches) {
-      ++stats_.loop_refused_matches;
-      continue;
-    }
-    if (!(reg.residual_rms < config_.loop_max_residual)) {
-      ++stats_.loop_refused_residual;
-      continue;
-    }
-    if (AmbiguousClosure(old, current, prior, reg)) {
+    // A second well-determined solution without the anchor that differs from the anchored one:
+    // the planes do not single out one relative pose. (The unanchored solution alone is not
+    // trusted either: where the anchored one finds nothing, it picks the wrong face about as
+    // often as the right one.)
+    const registration::RegistrationResult unanchored = UnanchoredRegistration(old, current, prior);
+    if (VerificationFault(unanchored) == 0 && Differ(anchored, unanchored)) {
       ++stats_.loop_refused_ambiguous;
       continue;
     }
+    const registration::RegistrationResult& reg = anchored;
     LoopClosureRecord record;
     record.from_keyframe = old.id;
     record.to_keyframe = current.id;
@@ -123,17 +127,14 @@ void SlamSystem::SearchLoopClosures(const Keyframe& current, SlamFrameResult* re
   }
 }
 
-bool SlamSystem::AmbiguousClosure(const Keyframe& old, const Keyframe& current,
-                                  const registration::MotionPrior& prior,
-                                  const registration::RegistrationResult& reg) const {
-  // The registration above is anchored on the estimate: its offset gate admits only partners
-  // within a few decimetres of where the drifted trajectory puts them, so after a drift along a
-  // wall a parallel face in front of the wall (a cabinet) can be the only partner left, and the
-  // wrong closure then agrees with the drifted trajectory. The same planes are associated again
-  // without that anchor (offsets gated only by the search radius, no preference for the
-  // prior); a second well-determined solution that differs from the first beyond the two
-  // covariances means the planes do not single out one relative pose, and the closure is
-  // refused rather than trusted to the prior.
+registration::RegistrationResult SlamSystem::UnanchoredRegistration(
+    const Keyframe& old, const Keyframe& current, const registration::MotionPrior& prior) const {
+  // The loop search's registration is anchored on the estimate: its offset gate admits only
+  // partners within a few decimetres of where the drifted trajectory puts them, so after a
+  // drift along a wall a parallel face in front of the wall (a cabinet) can be the only partner
+  // left, and the wrong closure then agrees with the drifted trajectory. The same planes are
+  // associated again without that anchor: offsets gated only by the search radius, no
+  // preference for the prior; the most supported consistent set wins.
   registration::AssociationConfig free_config = association_config_;
   free_config.max_offset_difference =
       std::max(association_config_.max_offset_difference, config_.loop_search_radius);
@@ -141,26 +142,36 @@ bool SlamSystem::AmbiguousClosure(const Keyframe& old, const Keyframe& current,
   registration::MotionPrior free_prior = prior;
   free_prior.covariance =
       DiagonalCovariance(config_.loop_search_radius, config_.loop_prior_rotation_sigma);
-  const registration::RegistrationResult alternative =
-      registration::AssociatePlanes(old.planes, current.planes, free_prior, free_config,
-                                    registration_config_)
-          .registration;
-  const bool well_determined =
-      alternative.converged && !alternative.degenerate &&
-      static_cast<int>(alternative.inliers.size()) >= config_.loop_min_matches &&
-      alternative.residual_rms < config_.loop_max_residual;
-  if (!well_determined) return false;
-  const Vector6d difference = registration::BoxMinus(alternative.T_prev_curr, reg.T_prev_curr);
-  const Matrix6d covariance = reg.covariance + alternative.covariance;
-  const double chi2 = difference.dot(InformationFromCovariance(covariance) * difference);
-  return chi2 > config_.loop_consistency_chi2;
+  return registration::AssociatePlanes(old.planes, current.planes, free_prior, free_config,
+                                       registration_config_)
+      .registration;
+}
+
+int SlamSystem::VerificationFault(const registration::RegistrationResult& reg) const {
+  // Only a closure the planes fully determine may correct the trajectory: a degenerate one
+  // would carry the (drifted) prior into the graph as if it were a measurement.
+  if (!reg.converged || reg.degenerate) return 1;
+  if (static_cast<int>(reg.inliers.size()) < config_.loop_min_matches) return 2;
+  if (!(reg.residual_rms < config_.loop_max_residual)) return 3;
+  return 0;
+}
+
+bool SlamSystem::Differ(const registration::RegistrationResult& a,
+                        const registration::RegistrationResult& b) const {
+  // Two well-determined solutions further apart than their covariances allow: the planes do
+  // not single out one relative pose, and the closure is refused rather than trusted to the
+  // prior.
+  const Vector6d difference = registration::BoxMinus(b.T_prev_curr, a.T_prev_curr);
+  const Matrix6d covariance = a.covariance + b.covariance;
+  return difference.dot(InformationFromCovariance(covariance) * difference) >
+         config_.loop_consistency_chi2;
 }
 
 void SlamSystem::InjectFalseClosures(const Keyframe& current, SlamFrameResult* result) {
   // Each planned closure links this keyframe to a random older one (not its predecessor) with
   // the estimate's relative pose off by 0.1-1 m and 2-20 deg: plausible for a registration, wrong
   // for the world. Its covariance is a verified closure's (the last one, else 1 cm / 0.3 deg).
-  std::mt19937_64 rng(kInjectionSeed + static_cast<std::uint64_t>(current.id));
+  std::mt19937_64 rng(InjectionSeed() + static_cast<std::uint64_t>(current.id));
   while (current.id >= 2 && next_injection_ < injection_frames_.size() &&
          injection_frames_[next_injection_] <= current.frame) {
     ++next_injection_;
