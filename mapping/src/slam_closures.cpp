@@ -246,11 +246,16 @@ void SlamSystem::CountSharedPlanes(LoopClosureRecord* record) const {
 void SlamSystem::ProposeClosure(LoopClosureRecord record, SlamFrameResult* result) {
   record.decided_frame = record.to_frame;
   CountSharedPlanes(&record);
-  if (2 * record.shared_agreeing < record.shared_planes) {
+  // Keyframes that share no map plane are tied only by chains of odometry, which stay loose
+  // where the planes left directions open: neither the trajectory test nor the pairwise one then
+  // has the power to reject a closure decimetres off, so the map must vouch for it.
+  const bool unshared = record.shared_planes == 0;
+  if (unshared || 2 * record.shared_agreeing < record.shared_planes) {
     record.status = ClosureStatus::kRejected;
-    record.reason = "contradicted by the map planes both keyframes see (" +
-                    std::to_string(record.shared_planes - record.shared_agreeing) + " of " +
-                    std::to_string(record.shared_planes) + ")";
+    record.reason = unshared ? std::string("the keyframes share no map plane")
+                             : "contradicted by the map planes both keyframes see (" +
+                                   std::to_string(record.shared_planes - record.shared_agreeing) +
+                                   " of " + std::to_string(record.shared_planes) + ")";
     ++stats_.closures_rejected;
     ++result->closures_rejected;
     closures_.push_back(std::move(record));
@@ -334,10 +339,7 @@ int SlamSystem::DecideClosures(std::int64_t current_id, SlamFrameResult* result)
     const std::size_t index = window[k];
     LoopClosureRecord& record = closures_[index];
     if (record.status != ClosureStatus::kPending) continue;
-    // Keyframes that share no map plane have nothing but the clique to vouch for the closure:
-    // it needs one more member.
-    const int needed = config_.loop_min_support + (record.shared_planes == 0 ? 1 : 0);
-    if (in_clique[k] && support >= needed) {
+    if (in_clique[k] && support >= config_.loop_min_support) {
       record.status = ClosureStatus::kAccepted;
       record.support = support;
       record.reason = "in the largest consistent set (" + std::to_string(support) + ")";

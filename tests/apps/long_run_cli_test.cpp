@@ -46,8 +46,9 @@ TEST(LongRunCli, InjectedFalseClosuresAreNotKept) {
 #ifdef PLANESLAM_CLANG_SANITIZER_BUILD
   GTEST_SKIP() << "known defect in the clang build: one of 50 injected false closures is accepted";
 #endif
-  // A family of draws (three seeds of 50 injected closures each), failure budget 0: no injected
-  // closure may stay accepted, and the trajectory stays within 0.2 cm of the clean run (0.87 cm).
+  // A family of draws (three seeds of 50 injected closures each; `bench long-run` and
+  // docs/RESULTS.md have five), failure budget 0: no injected closure may stay accepted, and the
+  // trajectory stays within 0.2 cm of the clean run (0.87 cm).
   for (int seed = 1; seed <= 3; ++seed) {
     SCOPED_TRACE("inject_seed " + std::to_string(seed));
     const fs::path dir = ScratchDir() / std::to_string(seed);

@@ -184,8 +184,7 @@ struct LoopClosureRecord {
   double chi2_residual = 0.0;  ///< whitened residual^2 after the last optimisation (accepted)
   int support = 0;             ///< size of the consistent set that accepted it
   /// Map planes observed from both keyframes, and how many of them the measured relative pose
-  /// maps onto each other (a closure most of them contradict is rejected; one with none needs
-  /// one more member in its consistent set).
+  /// maps onto each other (a closure with none, or most of them contradicting it, is rejected).
   int shared_planes = 0;
   int shared_agreeing = 0;
   ClosureStatus status = ClosureStatus::kPending;
