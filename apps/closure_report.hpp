@@ -11,7 +11,8 @@ namespace planeslam::app {
 
 /// closures.csv: one row per hypothesis (frame pair, keyframe pair, relative pose x y z qx qy qz
 /// qw, chi2 against the trajectory and after optimisation, support, status, reason, injected,
-/// decided_frame, and with ground truth: true, translation and rotation error).
+/// decided_frame, the map planes both keyframes see and those the pose agrees with, and with
+/// ground truth: true, translation and rotation error).
 void WriteClosuresCsv(const std::string& path, const mapping::SlamSystem& slam,
                       const datasets::Trajectory& ground_truth);
 

@@ -82,6 +82,8 @@ void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
   v.Field("inject_false_closures", c.inject_false_closures,
           "[closures] test hook: offer this many seeded wrong loop closures over the run", 0,
           1000000);
+  v.Field("inject_seed", c.inject_seed, "[-] test hook: seed of the injected closures", 1,
+          1000000);
 }
 
 std::vector<std::string> ValidateSlam(const mapping::SlamConfig& c) { return c.Validate(); }

@@ -261,7 +261,8 @@ std::string RunSession::Write(const std::string& out_dir) {
       {"loop_refused",
        {{"degenerate", stats.loop_refused_degenerate},
         {"matches", stats.loop_refused_matches},
-        {"residual", stats.loop_refused_residual}}},
+        {"residual", stats.loop_refused_residual},
+        {"ambiguous", stats.loop_refused_ambiguous}}},
       {"refused_frames", stats.refused_frames},
       {"degenerate_frames", stats.degenerate_frames},
       {"point_to_plane_frames", stats.point_to_plane_frames},
@@ -306,9 +307,10 @@ void RunSession::PrintReport(const std::string& ate_line, const std::string& out
       "(refused by the prior gate: %zu), frames with a direction from the prior %zu\n",
       stats.degenerate_frames, stats.point_to_plane_frames, stats.untracked_frames,
       stats.refused_frames, stats.prior_frames);
-  std::printf("loop candidates %zu, refused: degenerate %zu, few matches %zu, residual %zu\n",
-              stats.loop_candidates, stats.loop_refused_degenerate, stats.loop_refused_matches,
-              stats.loop_refused_residual);
+  std::printf(
+      "loop candidates %zu, refused: degenerate %zu, few matches %zu, residual %zu, ambiguous %zu\n",
+      stats.loop_candidates, stats.loop_refused_degenerate, stats.loop_refused_matches,
+      stats.loop_refused_residual, stats.loop_refused_ambiguous);
   std::printf("closure hypotheses %zu: accepted %zu, rejected %zu, retracted %zu (closures.csv)\n",
               slam_->closures().size(), stats.loop_closures, stats.closures_rejected,
               stats.closures_retracted);

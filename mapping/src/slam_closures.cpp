@@ -15,7 +15,7 @@ using namespace slam_internal;  // NOLINT: the helpers shared with slam_system.c
 
 namespace {
 
-constexpr std::uint64_t kInjectionSeed = 0x5eed'c105'0001ULL;
+constexpr std::uint64_t kInjectionSeed = 0x5eed'c105'0000ULL;
 
 /// Uniform in [0, 1) from 53 random bits (independent of the standard library's distributions).
 double Uniform(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
@@ -50,11 +50,16 @@ const char* ClosureStatusName(ClosureStatus status) {
   return "unknown";
 }
 
+std::uint64_t SlamSystem::InjectionSeed() const {
+  // Seed 1 gives the draws the hook has always made; others shift the stream far apart.
+  return kInjectionSeed + 1 + (static_cast<std::uint64_t>(config_.inject_seed) - 1) * 0x10000ULL;
+}
+
 void SlamSystem::PlanRun(std::size_t frames) {
   injection_frames_.clear();
   next_injection_ = 0;
   if (config_.inject_false_closures <= 0 || frames == 0) return;
-  std::mt19937_64 rng(kInjectionSeed);
+  std::mt19937_64 rng(InjectionSeed());
   for (int k = 0; k < config_.inject_false_closures; ++k) {
     injection_frames_.push_back(static_cast<std::size_t>(Uniform(rng) * frames));
   }
@@ -91,23 +96,26 @@ void SlamSystem::SearchLoopClosures(const Keyframe& current, SlamFrameResult* re
     prior.T_prev_curr = KeyframePose(old.id).inverse() * T_world_current;
     prior.covariance =
         DiagonalCovariance(config_.loop_prior_translation_sigma, config_.loop_prior_rotation_sigma);
-    const registration::AssociationResult association = registration::AssociatePlanes(
-        old.planes, current.planes, prior, association_config_, registration_config_);
-    const registration::RegistrationResult& reg = association.registration;
-    // Only a closure the planes fully determine may correct the trajectory: a degenerate one
-    // would carry the (drifted) prior into the graph as if it were a measurement.
-    if (!reg.converged || reg.degenerate) {
-      ++stats_.loop_refused_degenerate;
+    const registration::RegistrationResult anchored =
+        registration::AssociatePlanes(old.planes, current.planes, prior, association_config_,
+                                      registration_config_)
+            .registration;
+    const int fault = VerificationFault(anchored);
+    if (fault != 0) {
+      ++(fault == 1 ? stats_.loop_refused_degenerate
+                    : fault == 2 ? stats_.loop_refused_matches : stats_.loop_refused_residual);
       continue;
     }
-    if (static_cast<int>(reg.inliers.size()) < config_.loop_min_matches) {
-      ++stats_.loop_refused_matches;
+    // A second well-determined solution without the anchor that differs from the anchored one:
+    // the planes do not single out one relative pose. (The unanchored solution alone is not
+    // trusted either: where the anchored one finds nothing, it picks the wrong face about as
+    // often as the right one.)
+    const registration::RegistrationResult unanchored = UnanchoredRegistration(old, current, prior);
+    if (VerificationFault(unanchored) == 0 && Differ(anchored, unanchored)) {
+      ++stats_.loop_refused_ambiguous;
       continue;
     }
-    if (!(reg.residual_rms < config_.loop_max_residual)) {
-      ++stats_.loop_refused_residual;
-      continue;
-    }
+    const registration::RegistrationResult& reg = anchored;
     LoopClosureRecord record;
     record.from_keyframe = old.id;
     record.to_keyframe = current.id;
@@ -119,11 +127,51 @@ void SlamSystem::SearchLoopClosures(const Keyframe& current, SlamFrameResult* re
   }
 }
 
+registration::RegistrationResult SlamSystem::UnanchoredRegistration(
+    const Keyframe& old, const Keyframe& current, const registration::MotionPrior& prior) const {
+  // The loop search's registration is anchored on the estimate: its offset gate admits only
+  // partners within a few decimetres of where the drifted trajectory puts them, so after a
+  // drift along a wall a parallel face in front of the wall (a cabinet) can be the only partner
+  // left, and the wrong closure then agrees with the drifted trajectory. The same planes are
+  // associated again without that anchor: offsets gated only by the search radius, no
+  // preference for the prior; the most supported consistent set wins.
+  registration::AssociationConfig free_config = association_config_;
+  free_config.max_offset_difference =
+      std::max(association_config_.max_offset_difference, config_.loop_search_radius);
+  free_config.prior_gate_chi2 = 0.0;
+  registration::MotionPrior free_prior = prior;
+  free_prior.covariance =
+      DiagonalCovariance(config_.loop_search_radius, config_.loop_prior_rotation_sigma);
+  return registration::AssociatePlanes(old.planes, current.planes, free_prior, free_config,
+                                       registration_config_)
+      .registration;
+}
+
+int SlamSystem::VerificationFault(const registration::RegistrationResult& reg) const {
+  // Only a closure the planes fully determine may correct the trajectory: a degenerate one
+  // would carry the (drifted) prior into the graph as if it were a measurement.
+  if (!reg.converged || reg.degenerate) return 1;
+  if (static_cast<int>(reg.inliers.size()) < config_.loop_min_matches) return 2;
+  if (!(reg.residual_rms < config_.loop_max_residual)) return 3;
+  return 0;
+}
+
+bool SlamSystem::Differ(const registration::RegistrationResult& a,
+                        const registration::RegistrationResult& b) const {
+  // Two well-determined solutions further apart than their covariances allow: the planes do
+  // not single out one relative pose, and the closure is refused rather than trusted to the
+  // prior.
+  const Vector6d difference = registration::BoxMinus(b.T_prev_curr, a.T_prev_curr);
+  const Matrix6d covariance = a.covariance + b.covariance;
+  return difference.dot(InformationFromCovariance(covariance) * difference) >
+         config_.loop_consistency_chi2;
+}
+
 void SlamSystem::InjectFalseClosures(const Keyframe& current, SlamFrameResult* result) {
   // Each planned closure links this keyframe to a random older one (not its predecessor) with
   // the estimate's relative pose off by 0.1-1 m and 2-20 deg: plausible for a registration, wrong
   // for the world. Its covariance is a verified closure's (the last one, else 1 cm / 0.3 deg).
-  std::mt19937_64 rng(kInjectionSeed + static_cast<std::uint64_t>(current.id));
+  std::mt19937_64 rng(InjectionSeed() + static_cast<std::uint64_t>(current.id));
   while (current.id >= 2 && next_injection_ < injection_frames_.size() &&
          injection_frames_[next_injection_] <= current.frame) {
     ++next_injection_;
@@ -149,7 +197,70 @@ void SlamSystem::InjectFalseClosures(const Keyframe& current, SlamFrameResult* r
   }
 }
 
+void SlamSystem::CountSharedPlanes(LoopClosureRecord* record) const {
+  // Map planes observed from both keyframes: the closure maps the old keyframe's detection of
+  // each onto the new keyframe's (n_to = R^T n_from, d_to = d_from - n_from . t). They tie the two
+  // keyframes through the plane landmarks, which the chain covariances of the consistency tests
+  // know nothing of: a degenerate stretch of odometry leaves those loose, while the walls both
+  // keyframes see fix the relative pose to millimetres.
+  const auto detection = [&](std::int64_t keyframe, int detection_id) -> const detection::Plane* {
+    const auto& planes = keyframes_[static_cast<std::size_t>(keyframe)].planes;
+    const int k = detection_id - 1;
+    return k >= 0 && k < static_cast<int>(planes.size()) ? &planes[static_cast<std::size_t>(k)]
+                                                         : nullptr;
+  };
+  const Eigen::Matrix3d R = record->T_from_to.linear();
+  const Eigen::Vector3d t = record->T_from_to.translation();
+  const Eigen::Matrix3d translation_cov = record->covariance.topLeftCorner<3, 3>();
+  const double rotation_var = record->covariance.bottomRightCorner<3, 3>().trace() / 3.0;
+  record->shared_planes = record->shared_agreeing = 0;
+  for (const MapPlane& plane : map_.planes()) {
+    const detection::Plane* from = nullptr;
+    const detection::Plane* to = nullptr;
+    for (const PlaneObservation& obs : plane.observations) {
+      if (obs.keyframe_id == record->from_keyframe && !from) {
+        from = detection(obs.keyframe_id, obs.detection_id);
+      } else if (obs.keyframe_id == record->to_keyframe && !to) {
+        to = detection(obs.keyframe_id, obs.detection_id);
+      }
+    }
+    if (!from || !to) continue;
+    ++record->shared_planes;
+    const Eigen::Vector3d n_predicted = R.transpose() * from->normal;
+    const double d_predicted = from->d - from->normal.dot(t);
+    const double angle = std::acos(std::clamp(n_predicted.dot(to->normal), -1.0, 1.0));
+    // Variances: the landmark floors, both detections' own, the closure's along the plane.
+    const double angle_var = config_.landmark_normal_sigma * config_.landmark_normal_sigma +
+                             0.5 * (from->covariance.topLeftCorner<3, 3>().trace() +
+                                    to->covariance.topLeftCorner<3, 3>().trace()) +
+                             rotation_var;
+    const double offset_var = config_.landmark_offset_sigma * config_.landmark_offset_sigma +
+                              from->covariance(3, 3) + to->covariance(3, 3) +
+                              from->normal.dot(translation_cov * from->normal);
+    const double offset = d_predicted - to->d;
+    const double chi2 = angle * angle / angle_var + offset * offset / offset_var;
+    if (chi2 <= association_config_.inlier_chi2) ++record->shared_agreeing;
+  }
+}
+
 void SlamSystem::ProposeClosure(LoopClosureRecord record, SlamFrameResult* result) {
+  record.decided_frame = record.to_frame;
+  CountSharedPlanes(&record);
+  // Keyframes that share no map plane are tied only by chains of odometry, which stay loose
+  // where the planes left directions open: neither the trajectory test nor the pairwise one then
+  // has the power to reject a closure decimetres off, so the map must vouch for it.
+  const bool unshared = record.shared_planes == 0;
+  if (unshared || 2 * record.shared_agreeing < record.shared_planes) {
+    record.status = ClosureStatus::kRejected;
+    record.reason = unshared ? std::string("the keyframes share no map plane")
+                             : "contradicted by the map planes both keyframes see (" +
+                                   std::to_string(record.shared_planes - record.shared_agreeing) +
+                                   " of " + std::to_string(record.shared_planes) + ")";
+    ++stats_.closures_rejected;
+    ++result->closures_rejected;
+    closures_.push_back(std::move(record));
+    return;
+  }
   // The estimate's relative pose with the uncertainty of the best chain of edges between the two
   // keyframes; without a short chain, the drift the loop search assumes.
   const Pose T_estimate =
@@ -162,7 +273,6 @@ void SlamSystem::ProposeClosure(LoopClosureRecord record, SlamFrameResult* resul
   const UncertainPose deviation =
       Compose(Invert(estimate), UncertainPose{record.T_from_to, record.covariance});
   record.chi2_trajectory = IdentityChi2(deviation);
-  record.decided_frame = record.to_frame;
   if (!(record.chi2_trajectory <= config_.loop_consistency_chi2)) {
     record.status = ClosureStatus::kRejected;
     record.reason = Format("inconsistent with the trajectory: chi2 ", record.chi2_trajectory);

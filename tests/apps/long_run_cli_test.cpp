@@ -46,18 +46,26 @@ TEST(LongRunCli, InjectedFalseClosuresAreNotKept) {
 #ifdef PLANESLAM_CLANG_SANITIZER_BUILD
   GTEST_SKIP() << "known defect in the clang build: one of 50 injected false closures is accepted";
 #endif
-  const fs::path dir = ScratchDir();
-  const nlohmann::json summary = RunAndSummarise("--set slam.inject_false_closures=50", dir);
-  const nlohmann::json& closures = summary["closures"];
-  EXPECT_EQ(closures["injected"].get<int>(), 50);
-  EXPECT_EQ(closures["injected_accepted"].get<int>(), 0);
-  EXPECT_EQ(closures["ground_truth"]["false_accepted"].get<int>(), 0);
-  EXPECT_GT(closures["accepted"].get<int>(), 20);  // the room's true closures still close it
-  // Clean run: 0.85 cm; the acceptance allows 0.2 cm more.
-  EXPECT_LT(summary["metrics"]["ate"]["rmse"].get<double>(), 0.0105);
-  // One closures.csv row per hypothesis, each with a status and a reason.
-  EXPECT_EQ(CountLines(Slurp(dir / "out" / "closures.csv")),
-            closures["hypotheses"].get<std::size_t>() + 1);
+  // A family of draws (three seeds of 50 injected closures each; `bench long-run` and
+  // docs/RESULTS.md have five), failure budget 0: no injected closure may stay accepted, and the
+  // trajectory stays within 0.2 cm of the clean run (0.87 cm).
+  for (int seed = 1; seed <= 3; ++seed) {
+    SCOPED_TRACE("inject_seed " + std::to_string(seed));
+    const fs::path dir = ScratchDir() / std::to_string(seed);
+    fs::create_directories(dir);
+    const nlohmann::json summary = RunAndSummarise(
+        "--set slam.inject_false_closures=50 --set slam.inject_seed=" + std::to_string(seed), dir);
+    const nlohmann::json& closures = summary["closures"];
+    // A closure planned for a frame after the last keyframe is never offered.
+    EXPECT_GE(closures["injected"].get<int>(), 45);
+    EXPECT_EQ(closures["injected_accepted"].get<int>(), 0);
+    EXPECT_EQ(closures["ground_truth"]["false_accepted"].get<int>(), 0);
+    EXPECT_GT(closures["accepted"].get<int>(), 20);  // the room's true closures still close it
+    EXPECT_LT(summary["metrics"]["ate"]["rmse"].get<double>(), 0.0107);
+    // One closures.csv row per hypothesis, each with a status and a reason.
+    EXPECT_EQ(CountLines(Slurp(dir / "out" / "closures.csv")),
+              closures["hypotheses"].get<std::size_t>() + 1);
+  }
 }
 
 TEST(LongRunCli, AliasingRingAcceptsNoFalseClosure) {

@@ -138,6 +138,9 @@ struct SlamConfig {
   /// by 0.1-1 m and 2-20 deg from the estimate, a verified closure's covariance) are offered to
   /// the hypothesis test over the run (needs PlanRun). 0: none.
   int inject_false_closures = 0;
+  /// Test hook: seed of the injected closures (frames, keyframe pairs, errors), for families of
+  /// draws.
+  int inject_seed = 1;
   /// Problems with the values, empty when fine.
   std::vector<std::string> Validate() const;
 };
@@ -180,6 +183,10 @@ struct LoopClosureRecord {
   double chi2_trajectory = 0.0;
   double chi2_residual = 0.0;  ///< whitened residual^2 after the last optimisation (accepted)
   int support = 0;             ///< size of the consistent set that accepted it
+  /// Map planes observed from both keyframes, and how many of them the measured relative pose
+  /// maps onto each other (a closure with none, or most of them contradicting it, is rejected).
+  int shared_planes = 0;
+  int shared_agreeing = 0;
   ClosureStatus status = ClosureStatus::kPending;
   std::string reason;          ///< why accepted, rejected or retracted
   bool injected = false;       ///< a test-hook false closure
@@ -197,6 +204,8 @@ struct SlamStats {
   std::size_t loop_refused_degenerate = 0;
   std::size_t loop_refused_matches = 0;
   std::size_t loop_refused_residual = 0;
+  /// Candidates whose planes also fit a different relative pose without the estimate's anchor.
+  std::size_t loop_refused_ambiguous = 0;
   std::size_t closures_rejected = 0;   ///< hypotheses rejected (inconsistent or unsupported)
   std::size_t closures_retracted = 0;  ///< accepted, then outliers of the optimisation
   std::size_t closures_injected = 0;   ///< test-hook false closures offered
@@ -273,9 +282,24 @@ class SlamSystem {
                    const datasets::OrganizedCloud& cloud);
   /// Verifies the loop candidates of the new keyframe; the verified ones become hypotheses.
   void SearchLoopClosures(const Keyframe& current, SlamFrameResult* result);
+  /// The loop candidate's planes associated without the estimate's anchor (offsets gated by the
+  /// search radius only, no preference for the prior).
+  registration::RegistrationResult UnanchoredRegistration(
+      const Keyframe& old, const Keyframe& current, const registration::MotionPrior& prior) const;
+  /// Why a loop registration cannot be a closure: 0 usable, 1 not converged or degenerate, 2 too
+  /// few matches, 3 residual too large.
+  int VerificationFault(const registration::RegistrationResult& reg) const;
+  /// Whether two registrations differ beyond their covariances (chi2 > loop_consistency_chi2).
+  bool Differ(const registration::RegistrationResult& a,
+              const registration::RegistrationResult& b) const;
+  /// Seed of the test hook's random stream (inject_seed).
+  std::uint64_t InjectionSeed() const;
   /// The planned false closures of the test hook for this keyframe.
   void InjectFalseClosures(const Keyframe& current, SlamFrameResult* result);
-  /// New hypothesis: tested against the trajectory estimate, then pending or rejected.
+  /// Counts the map planes both keyframes of a closure see and those the closure agrees with.
+  void CountSharedPlanes(LoopClosureRecord* record) const;
+  /// New hypothesis: tested against the shared map planes and the trajectory estimate, then
+  /// pending or rejected.
   void ProposeClosure(LoopClosureRecord record, SlamFrameResult* result);
   /// PCM decision over the window; adds the accepted closures' edges. Returns how many.
   int DecideClosures(std::int64_t current_id, SlamFrameResult* result);
