@@ -88,6 +88,39 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
   return result;
 }
 
+namespace {
+
+/// A frame without a velocity to predict from (the second one): the prior is the coarse-to-fine
+/// alignment of its cloud to the first one's, around the constant-velocity guess.
+/// Releases `first`.
+void BootstrapPrior(datasets::OrganizedCloud* first, const datasets::OrganizedCloud& cloud,
+                    double voxel, registration::MotionPrior* prior) {
+  const registration::MapAlignmentResult a = registration::AlignScansCoarseToFine(
+      *first, cloud, prior->T_prev_curr, registration::MotionPrior{}.covariance, voxel, {});
+  if (a.valid && a.converged) {
+    prior->T_prev_curr = a.T_prev_curr;
+    prior->covariance += a.covariance;
+  }
+  *first = {};
+}
+
+/// Fills the directions the planes leave open from the local map, then refines all six with the
+/// points (registration/local_map.hpp). Returns whether the points filled a direction.
+bool AlignToLocalMap(const registration::LocalVoxelMap& map, const Pose& T_world_keyframe,
+                     const std::vector<registration::ShapedPoint>& structure,
+                     registration::RegistrationResult* reg) {
+  const std::vector<registration::ShapedPoint> source =
+      registration::ThinShapedPoints(structure, 1.5 * map.voxel_size());
+  bool filled = false;
+  if (reg->degenerate) {
+    filled = registration::FillDegenerateFromLocalMap(map, T_world_keyframe, source, {}, reg);
+  }
+  registration::RefineWithLocalMap(map, T_world_keyframe, source, {}, reg);
+  return filled;
+}
+
+}  // namespace
+
 SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::OrganizedCloud& cloud,
                                        const detection::Segmentation& segmentation) {
   SlamFrameResult result;
@@ -109,7 +142,10 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
     if (cloud.model == datasets::SensorModel::kPinhole) {
       intrinsics_ = registration::EstimatePinholeIntrinsics(cloud);
     }
-    if (local_map_) local_map_->Insert(structure, T_world_first_, registration::ScanReach(cloud));
+    if (local_map_) {
+      local_map_->Insert(structure, T_world_first_, registration::ScanReach(cloud));
+      first_cloud_ = cloud;
+    }
     AddKeyframe(result.index, T_world_first_, segmentation, cloud);
     frames_.push_back({timestamp, 0, Pose::Identity()});
     result.T_world_sensor = T_world_first_;
@@ -132,6 +168,7 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
   // keyframe the prior's error accumulates frame after frame, and the odometry edge must say so.
   prior.covariance = covariance_keyframe_last_ + DiagonalCovariance(config_.prior_translation_sigma,
                                                                     config_.prior_rotation_sigma);
+  if (!first_cloud_.empty()) BootstrapPrior(&first_cloud_, cloud, local_map_->voxel_size(), &prior);
   const registration::AssociationResult association = registration::AssociatePlanes(
       keyframe.planes, segmentation.planes, prior, association_config_, registration_config_);
   registration::RegistrationResult reg = association.registration;
@@ -139,9 +176,9 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
     result.used_point_to_plane = registration::FillDegenerateWithPointToPlane(
         keyframe_cloud_, *intrinsics_, cloud, point_to_plane_config_, &reg);
   }
-  if (reg.converged && reg.degenerate && local_map_ && !structure.empty()) {
-    result.used_point_to_plane = registration::FillDegenerateFromLocalMap(
-        *local_map_, KeyframePose(keyframe.id), structure, {}, &reg);
+  if (reg.converged && local_map_ && !structure.empty()) {
+    result.used_point_to_plane =
+        AlignToLocalMap(*local_map_, KeyframePose(keyframe.id), structure, &reg);
   }
   result.weak_directions = static_cast<int>(reg.degenerate_directions.size());
   result.matches = static_cast<int>(reg.inliers.size());

@@ -149,6 +149,17 @@ std::vector<ScanPoint> VoxelDownsample(const std::vector<ScanPoint>& points, dou
   return out;
 }
 
+std::vector<ShapedPoint> ThinShapedPoints(const std::vector<ShapedPoint>& points, double voxel) {
+  if (!(voxel > 0)) return points;
+  std::unordered_map<Eigen::Vector3i, char, KeyHash> seen;
+  seen.reserve(points.size());
+  std::vector<ShapedPoint> out;
+  for (const auto& p : points) {
+    if (seen.emplace(VoxelOf(p.position, voxel), 1).second) out.push_back(p);
+  }
+  return out;
+}
+
 std::vector<ShapedPoint> ScanStructure(const datasets::OrganizedCloud& cloud,
                                        const std::vector<std::int32_t>* labels, double voxel) {
   return ShapePoints(VoxelDownsample(StructurePoints(cloud, labels), 0.5 * voxel), voxel);
@@ -331,6 +342,27 @@ MapAlignmentResult AlignToLocalMap(const LocalVoxelMap& map, const Pose& T_world
   return res;
 }
 
+MapAlignmentResult AlignScansCoarseToFine(const datasets::OrganizedCloud& prev,
+                                          const datasets::OrganizedCloud& curr,
+                                          const Pose& T_init, const Matrix6d& prior_covariance,
+                                          double voxel, const LocalMapConfig& config) {
+  MapAlignmentResult out;
+  out.T_prev_curr = T_init;
+  Pose T = T_init;
+  for (const double scale : {4.0, 2.0, 1.0}) {
+    const double v = voxel * scale;
+    LocalVoxelMap map(v, config.max_points_per_voxel);
+    map.Insert(ScanStructure(prev, nullptr, v), Pose::Identity(), 0.0);
+    const MapAlignmentResult a =
+        AlignToLocalMap(map, Pose::Identity(), ScanStructure(curr, nullptr, v), T,
+                        Matrix6d::Identity(), prior_covariance, config);
+    if (!a.valid) return out;  // valid stays false
+    T = a.T_prev_curr;
+    out = a;
+  }
+  return out;
+}
+
 namespace {
 
 /// Directions (indices into the columns of `dirs`) the pairs alone pin down: enough support and
@@ -401,6 +433,22 @@ bool FillDegenerateFromLocalMap(const LocalVoxelMap& map, const Pose& T_world_pr
   result->prior_directions = k - static_cast<int>(keep.size());
   for (int i : keep) result->prior_translations -= IsTranslation(D.col(i)) ? 1 : 0;
   result->used_prior = result->prior_directions > 0;
+  return true;
+}
+
+bool RefineWithLocalMap(const LocalVoxelMap& map, const Pose& T_world_prev,
+                        const std::vector<ShapedPoint>& source, const LocalMapConfig& config,
+                        RegistrationResult* result) {
+  const Matrix6d prior = result->covariance;
+  const MapAlignmentResult a = AlignToLocalMap(map, T_world_prev, source, result->T_prev_curr,
+                                               Matrix6d::Identity(), prior, config);
+  if (!a.valid) return false;
+  const Vector6d y = BoxMinus(a.T_prev_curr, result->T_prev_curr);
+  if (!(y.dot(prior.ldlt().solve(y)) <= Chi2Quantile999(6.0))) return false;
+  Matrix6d cov = 0.5 * (a.covariance + a.covariance.transpose());
+  if (!cov.allFinite() || !a.T_prev_curr.matrix().allFinite()) return false;
+  result->T_prev_curr = a.T_prev_curr;
+  result->covariance = cov;
   return true;
 }
 

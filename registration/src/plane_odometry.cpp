@@ -41,12 +41,15 @@ void PlaneOdometry::Reset(const Pose& T_world_first) {
   frames_ = 0;
 }
 
+bool PlaneOdometry::HasVelocity(double timestamp) const {
+  const double dt = timestamp - prev_stamp_;
+  return !velocity_.empty() && dt > 0 && dt <= config_.max_prior_gap && last_dt_ > 0;
+}
+
 MotionPrior PlaneOdometry::Predict(double timestamp) const {
   MotionPrior prior;  // "no motion", weak: used without a velocity or across a long gap
   const double dt = timestamp - prev_stamp_;
-  if (velocity_.empty() || !(dt > 0) || !(dt <= config_.max_prior_gap) || !(last_dt_ > 0)) {
-    return prior;
-  }
+  if (!HasVelocity(timestamp)) return prior;
   // Constant velocity, scaled to this interval in the (t, log R) tangent.
   const double ratio = dt / last_dt_;
   prior.T_prev_curr = velocity_.Predict(dt);
@@ -127,6 +130,9 @@ OdometryStep PlaneOdometry::Step(double timestamp, const std::vector<detection::
     }
     if (map_ != nullptr) structure = ScanStructure(*cloud, labels, map_->voxel_size());
   }
+  // The alignment's queries, thinned further (KISS-ICP aligns a sparser copy than it maps).
+  const std::vector<ShapedPoint> source =
+      map_ != nullptr ? ThinShapedPoints(structure, 1.5 * map_->voxel_size()) : structure;
   double points_ms = std::chrono::duration<double, std::milli>(Clock::now() - t_points).count();
   if (!have_prev_) {
     step.first_frame = true;
@@ -136,6 +142,23 @@ OdometryStep PlaneOdometry::Step(double timestamp, const std::vector<detection::
   } else {
     step.planes_prev = static_cast<int>(prev_planes_.size());
     step.prior = Predict(timestamp);
+    if (!HasVelocity(timestamp) && map_ != nullptr && cloud != nullptr && !prev_cloud_.empty()) {
+      // No velocity to predict from: the scans' own alignment is the prior, widened by one
+      // frame's change of motion (its pairs are correlated, their covariance optimistic).
+      const auto tb = Clock::now();
+      const MapAlignmentResult a =
+          AlignScansCoarseToFine(prev_cloud_, *cloud, step.prior.T_prev_curr,
+                                 step.prior.covariance, map_->voxel_size(), config_.local_map);
+      if (a.valid && a.converged) {
+        Vector6d sig;
+        sig << Eigen::Vector3d::Constant(config_.prior_translation_sigma),
+            Eigen::Vector3d::Constant(config_.prior_rotation_sigma);
+        step.prior.T_prev_curr = a.T_prev_curr;
+        step.prior.covariance = a.covariance + Matrix6d(sig.array().square().matrix().asDiagonal());
+        step.bootstrapped = true;
+      }
+      points_ms += std::chrono::duration<double, std::milli>(Clock::now() - tb).count();
+    }
     const auto t0 = Clock::now();
     AssociationResult assoc = AssociatePlanes(prev_planes_, planes, step.prior, config_.association,
                                               config_.registration);
@@ -144,7 +167,15 @@ OdometryStep PlaneOdometry::Step(double timestamp, const std::vector<detection::
     RegistrationResult reg = std::move(assoc.registration);
     if (reg.degenerate && config_.use_point_to_plane && cloud != nullptr) {
       const auto t1 = Clock::now();
-      FillOpenDirections(*cloud, structure, &reg);
+      FillOpenDirections(*cloud, source, &reg);
+      points_ms += std::chrono::duration<double, std::milli>(Clock::now() - t1).count();
+    }
+    // Range images refine all six directions on the map; depth images keep the planes' estimate
+    // where it is determined (their map holds one camera's narrow view of few structure points).
+    if (reg.converged && map_ != nullptr && !source.empty() &&
+        cloud->model != datasets::SensorModel::kPinhole) {
+      const auto t1 = Clock::now();
+      RefineWithLocalMap(*map_, T_world_sensor_, source, config_.local_map, &reg);
       points_ms += std::chrono::duration<double, std::milli>(Clock::now() - t1).count();
     }
     step.T_prev_curr = reg.T_prev_curr;

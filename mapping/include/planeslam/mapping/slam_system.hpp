@@ -325,6 +325,9 @@ class SlamSystem {
   /// Range images (LiDAR): the local map of recent frames' structure that fills the directions
   /// the planes leave open (registration/local_map.hpp); cleared when the graph moves the poses.
   std::unique_ptr<registration::LocalVoxelMap> local_map_;
+  /// The first range image, until the second frame's motion is bootstrapped from it (no velocity
+  /// yet: registration::AlignScansCoarseToFine).
+  datasets::OrganizedCloud first_cloud_;
   PoseGraphConfig pose_graph_config_;
   PoseGraph graph_;
   PlaneMap map_;

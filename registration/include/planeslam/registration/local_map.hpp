@@ -1,6 +1,8 @@
 #pragma once
-/// A local map of recent scans' structure points and the alignment of a scan against it, used
-/// where the planes leave directions of the motion open (a corridor's or a street's axis).
+/// A local map of recent scans' structure points and the alignment of a scan against it: it
+/// fills the directions of the motion the planes leave open (a corridor's or a street's axis) and
+/// then refines all six with the planes' estimate as the prior (scan to map, so the frame-to-frame
+/// noise of the planes' normals does not accumulate as drift).
 ///
 /// The map is a voxel hash in the style of KISS-ICP (Vizzo et al., RA-L 2023): a few points per
 /// voxel, nearest neighbours among the 27 voxels around a query, voxels farther from the sensor
@@ -76,6 +78,9 @@ std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, doubl
 std::vector<ShapedPoint> ScanStructure(const datasets::OrganizedCloud& cloud,
                                        const std::vector<std::int32_t>* labels, double voxel);
 
+/// One shaped point per occupied voxel of edge `voxel` (the first one met), in input order.
+std::vector<ShapedPoint> ThinShapedPoints(const std::vector<ShapedPoint>& points, double voxel);
+
 class LocalVoxelMap {
  public:
   struct MapPoint {
@@ -135,6 +140,17 @@ MapAlignmentResult AlignToLocalMap(const LocalVoxelMap& map, const Pose& T_world
                                    const Eigen::MatrixXd& prior_covariance,
                                    const LocalMapConfig& config);
 
+/// Aligns `curr` to `prev` (two clouds of one sensor, T_init = T_prev_curr to start from) in all
+/// six directions, coarse to fine: all valid points of both, shaped (ScanStructure) at 4, 2 and 1
+/// times `voxel`, each level starting from the one before. The wide first level reaches a motion
+/// that a prior without a velocity misses by metres (a car's first scans), which a plane
+/// association gated around that prior would alias to a repeated facade. `prior_covariance` is
+/// over (dt, dtheta); invalid when a level finds too few pairs.
+MapAlignmentResult AlignScansCoarseToFine(const datasets::OrganizedCloud& prev,
+                                          const datasets::OrganizedCloud& curr,
+                                          const Pose& T_init, const Matrix6d& prior_covariance,
+                                          double voxel, const LocalMapConfig& config);
+
 /// Aligns along result->degenerate_directions (prior: the result's covariance there, around the
 /// planes' pose) and, for the directions the points pin down, takes the aligned pose and the
 /// alignment's covariance there; sets used_icp and point_directions, and used_prior and
@@ -144,6 +160,14 @@ MapAlignmentResult AlignToLocalMap(const LocalVoxelMap& map, const Pose& T_world
 bool FillDegenerateFromLocalMap(const LocalVoxelMap& map, const Pose& T_world_prev,
                                 const std::vector<ShapedPoint>& source,
                                 const LocalMapConfig& config, RegistrationResult* result);
+
+/// The registration's pose refined in all six directions by the scan's points against the map,
+/// the registration (planes and whatever filled their open directions) as the prior with its
+/// covariance: the planes keep the directions they determine well, the points add what the
+/// planes measure coarsely. Refused like FillDegenerateFromLocalMap. Returns whether it moved.
+bool RefineWithLocalMap(const LocalVoxelMap& map, const Pose& T_world_prev,
+                        const std::vector<ShapedPoint>& source, const LocalMapConfig& config,
+                        RegistrationResult* result);
 
 /// What constrained a registration: "planes", "points", "prior" joined by '+' in that order
 /// (e.g. "planes+points"); from its flags and direction counts.

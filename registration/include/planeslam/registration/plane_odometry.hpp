@@ -1,7 +1,8 @@
 #pragma once
 /// Frame-to-frame odometry on planes: association, closed-form motion with covariance, the
 /// alignment of the scan's other structure to a local map of recent scans along the directions
-/// the planes leave open (local_map.hpp), a constant-velocity prior, and the accumulated pose.
+/// the planes leave open and then in all six (local_map.hpp), a constant-velocity prior (the
+/// scans' coarse-to-fine alignment while there is no velocity), and the accumulated pose.
 /// Used by `planeslam bench odometry` and the library's odometry example.
 #include <Eigen/Core>
 #include <cstddef>
@@ -69,6 +70,9 @@ struct OdometryStep {
   /// Flags (converged, degenerate + directions, used_prior, used_icp), inliers, residuals.
   RegistrationResult registration;
   MotionPrior prior;  ///< the constant-velocity prediction used
+  /// No velocity to predict from (first pair, long gap): the prior is the coarse-to-fine
+  /// alignment of the two clouds (AlignScansCoarseToFine).
+  bool bootstrapped = false;
   int planes_prev = 0;
   int planes_curr = 0;
   int candidates = 0;  ///< association candidates after gating
@@ -110,6 +114,8 @@ class PlaneOdometry {
   OdometryStep Step(double timestamp, const std::vector<detection::Plane>& planes,
                     const datasets::OrganizedCloud* cloud, const std::vector<std::int32_t>* labels);
   MotionPrior Predict(double timestamp) const;
+  /// Whether a velocity predicts the frame at `timestamp` (else Predict gives "no motion").
+  bool HasVelocity(double timestamp) const;
   /// Fills the directions the planes left open in `reg`: projective point-to-plane against the
   /// previous cloud when both are pinhole grids of one size, else the alignment of the frame's
   /// structure points to the local map.
