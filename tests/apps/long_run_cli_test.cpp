@@ -19,15 +19,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// The clang sanitizer build follows another floating-point path through the same run, and there
-// the closure test accepts one of the 50 injected closures (ATE 5.1 cm): an open defect of the
-// closure hypotheses, so that build reports it as a skip instead of hiding it behind a looser bound.
-#if defined(__clang__) && defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define PLANESLAM_CLANG_SANITIZER_BUILD 1
-#endif
-#endif
-
 nlohmann::json RunAndSummarise(const std::string& args, const fs::path& dir) {
   const fs::path out = dir / "out";
   const CliResult r =
@@ -43,9 +34,6 @@ std::size_t CountLines(const std::string& text) {
 }
 
 TEST(LongRunCli, InjectedFalseClosuresAreNotKept) {
-#ifdef PLANESLAM_CLANG_SANITIZER_BUILD
-  GTEST_SKIP() << "known defect in the clang build: one of 50 injected false closures is accepted";
-#endif
   // A family of draws (three seeds of 50 injected closures each; `bench long-run` and
   // docs/RESULTS.md have five), failure budget 0: no injected closure may stay accepted, and the
   // trajectory stays within 0.2 cm of the clean run (0.87 cm).
