@@ -138,26 +138,29 @@ Eigen::MatrixXd InverseOrZero(const Eigen::MatrixXd& a) {
 
 }  // namespace
 
-std::vector<ScanPoint> VoxelDownsample(const std::vector<ScanPoint>& points, double voxel) {
+namespace {
+
+/// The first point of each voxel, in input order (ScanPoint and ShapedPoint alike).
+template <typename Point>
+std::vector<Point> FirstPerVoxel(const std::vector<Point>& points, double voxel) {
   if (!(voxel > 0)) return points;
   std::unordered_map<Eigen::Vector3i, char, KeyHash> seen;
   seen.reserve(points.size());
-  std::vector<ScanPoint> out;
+  std::vector<Point> out;
   for (const auto& p : points) {
     if (seen.emplace(VoxelOf(p.position, voxel), 1).second) out.push_back(p);
   }
   return out;
 }
 
+}  // namespace
+
+std::vector<ScanPoint> VoxelDownsample(const std::vector<ScanPoint>& points, double voxel) {
+  return FirstPerVoxel(points, voxel);
+}
+
 std::vector<ShapedPoint> ThinShapedPoints(const std::vector<ShapedPoint>& points, double voxel) {
-  if (!(voxel > 0)) return points;
-  std::unordered_map<Eigen::Vector3i, char, KeyHash> seen;
-  seen.reserve(points.size());
-  std::vector<ShapedPoint> out;
-  for (const auto& p : points) {
-    if (seen.emplace(VoxelOf(p.position, voxel), 1).second) out.push_back(p);
-  }
-  return out;
+  return FirstPerVoxel(points, voxel);
 }
 
 std::vector<ShapedPoint> ScanStructure(const datasets::OrganizedCloud& cloud,

@@ -27,6 +27,11 @@ FAILURES = []
 PASSED = []
 
 
+def dry_run_names(r):
+    """The job names a `batch --dry-run` lists (one line per job, its command indented below)."""
+    return [line.split(" ")[0] for line in r.stdout.splitlines()[1:] if not line.startswith(" ")]
+
+
 def check(condition, message):
     print(("ok    " if condition else "FAIL  ") + message, flush=True)
     (PASSED if condition else FAILURES).append(message)
@@ -340,7 +345,7 @@ def mode_manifest(planeslam, work):
                         "    set: {detection.method: grid-fast}\n")
     r = run([planeslam, "batch", smallest, "--out", work / "o", "--dry-run"])
     check(r.returncode == 0, "smallest manifest: dry run exits 0: " + r.stderr.strip())
-    names = [line.split(" ")[0] for line in r.stdout.splitlines()[1:] if not line.startswith(" ")]
+    names = dry_run_names(r)
     check(names == ["room/default", "room/fast", "corridor/default", "corridor/fast"],
           f"smallest manifest: four jobs <sequence>/<variant>: {names}")
     check(f"run {work / 'room'} --set detection.method=grid-fast --out {work / 'o' / 'room' / 'fast'}"
@@ -354,7 +359,7 @@ def mode_manifest(planeslam, work):
                      "    sweep: {detection.theta: [200, 800], grid.cell_size: [3, 6]}\n"
                      "set: {octomap.enabled: false}\ntime_limit: '1:30'\n")
     r = run([planeslam, "batch", sweep, "--out", work / "o", "--dry-run"])
-    names = [line.split(" ")[0] for line in r.stdout.splitlines()[1:] if not line.startswith(" ")]
+    names = dry_run_names(r)
     expected = [f"{s}/t+detection.theta={t}+grid.cell_size={c}" for s in ("r1", "rubble")
                 for t in (200, 800) for c in (3, 6)]
     check(r.returncode == 0 and names == expected, f"sweep: 2 x 2 values x 2 sequences: {names}")
@@ -371,7 +376,7 @@ def mode_manifest(planeslam, work):
                       "    set: {detection.method: grid-fast}\n"
                       "  - name: t\n    sweep: {detection.theta: [200, 800]}\n")
     r = run([planeslam, "batch", subset, "--out", work / "o", "--dry-run"])
-    names = [line.split(" ")[0] for line in r.stdout.splitlines()[1:] if not line.startswith(" ")]
+    names = dry_run_names(r)
     expected = ["room/default", "room/fast", "room/t+detection.theta=200",
                 "room/t+detection.theta=800", "corridor/fast", "rubble/default",
                 "rubble/t+detection.theta=200", "rubble/t+detection.theta=800"]
