@@ -83,6 +83,7 @@ struct Growth {
   std::size_t flushed = 0;
   NormalSums along;        ///< of every member, along fit.normal
   MomentSums merged;       ///< scratch: the full moments with a tested point
+  FastFit merged_fit;      ///< scratch: the plane of `merged`
   FastFit fit;
   double since_refit = 0;
 };
@@ -90,9 +91,9 @@ struct Growth {
 /// Outcome of the join test of one point.
 struct JoinTest {
   bool accept = false;
-  bool refitted = false;  ///< new_fit holds the plane of the region with the point (Growth::merged)
+  /// Growth::merged and merged_fit hold the region with the point and its plane.
+  bool refitted = false;
   double merged_iso = 0;  ///< isotropic MSE of the region with the point
-  FastFit new_fit;
 };
 
 /// One PBRG pass over a cloud: the per-pixel state in the workspace and the steps of
@@ -301,7 +302,7 @@ class PbrgPass {
 
   /// The join test of point c (at pc, relative noise w) for region `g` (Algorithm 1 line 9).
   /// Between refits (refit_interval != 1), c has passed NearCurrentPlane. A refitting test
-  /// leaves g's moments with c added in g->merged.
+  /// leaves g's moments with c added in g->merged and their plane in g->merged_fit.
   JoinTest TestJoin(int c, const Eigen::Vector3d& pc, double w, Growth* g) const {
     JoinTest test;
     const FastFit& fit = g->fit;
@@ -321,14 +322,15 @@ class PbrgPass {
     Flush(g);
     MomentSums& merged = g->merged;
     merged.SetSum(g->sums, pc.x(), pc.y(), pc.z(), w);
-    test.new_fit = RefitFrom(merged, fit.normal);
+    FastFit& new_fit = g->merged_fit;
+    new_fit = RefitFrom(merged, fit.normal);
     test.refitted = true;
     test.merged_iso = merged.IsotropicMse();
-    test.accept = MseWithinEpsilon(test.new_fit.mse, merged, test.new_fit.normal, test.new_fit.l2);
+    test.accept = MseWithinEpsilon(new_fit.mse, merged, new_fit.normal, new_fit.l2);
     if (point_.refit_interval == 1) {
       // The paper's test: distance and MSE against the plane refitted with the point.
-      const double dist = std::abs(test.new_fit.normal.dot(pc) - test.new_fit.d);
-      test.accept = test.accept && dist < GammaFor(test.new_fit, test.merged_iso, c, pc);
+      const double dist = std::abs(new_fit.normal.dot(pc) - new_fit.d);
+      test.accept = test.accept && dist < GammaFor(new_fit, test.merged_iso, c, pc);
     }
     return test;
   }
@@ -360,7 +362,7 @@ class PbrgPass {
     if (test.refitted) {
       std::swap(g->sums, g->merged);
       g->flushed = ws_.members.size();
-      g->fit = test.new_fit;
+      g->fit = g->merged_fit;
       g->along.Set(g->sums, g->fit.normal);
       g->since_refit = 0;
       return;
@@ -393,7 +395,7 @@ class PbrgPass {
     const JoinTest test = TestJoin(c, pc, w, g);
     if (!test.accept) return;
     if (owner >= 0 &&
-        !TakeJointPoint(c, pc, owner, test.refitted ? test.new_fit : g->fit, test.merged_iso))
+        !TakeJointPoint(c, pc, owner, test.refitted ? g->merged_fit : g->fit, test.merged_iso))
       return;
     ws_.labels[c] = g->r;
     ws_.visited[c] = 1;
