@@ -19,10 +19,15 @@ double Ms(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
 }
 
+/// A pixel's state in Workspace::labels besides its region (>= 0): free (valid, in no region
+/// yet), set aside (in a region too small to keep: R', never a seed or a member again), invalid.
+/// One load tells a neighbour's state; the set-aside and invalid pixels become kFree (no region)
+/// for the output.
+constexpr std::int32_t kFree = -1, kSetAside = -2, kInvalid = -3;
+
 struct Workspace {
-  std::vector<std::int32_t> labels;   ///< region index (accepted or growing), -1 none
-  std::vector<std::uint8_t> visited;  ///< in some region, accepted or not: never a seed again
-  std::vector<float> rel2;            ///< (sigma(z)/z)^2 per pixel
+  std::vector<std::int32_t> labels;  ///< region index (accepted or growing), or a state above
+  std::vector<float> rel2;           ///< (sigma(z)/z)^2 per pixel
   std::vector<int> members;
   std::vector<MomentSums> regions;
   std::vector<FastFit> fits;                ///< of accepted regions, at acceptance
@@ -114,13 +119,13 @@ class PbrgPass {
 
   /// Resets the workspace and computes each point's relative noise (sigma(z)/z)^2, -1 when invalid.
   void Prepare() {
-    ws_.labels.assign(n_, -1);
-    ws_.visited.assign(n_, 0);
+    ws_.labels.assign(n_, kFree);
     ws_.rel2.resize(n_);
     for (std::size_t i = 0; i < n_; ++i) {
       const Eigen::Vector3f& p = pts_[i];
       if (!std::isfinite(p.z())) {
-        ws_.rel2[i] = -1.0f;  // invalid
+        ws_.rel2[i] = -1.0f;
+        ws_.labels[i] = kInvalid;
         continue;
       }
       const double z = internal::PointDepth(p, spherical_);
@@ -131,10 +136,11 @@ class PbrgPass {
     ws_.fits.clear();
   }
 
-  /// Visits the points in scan order; each unvisited one that makes a seed grows a region.
+  /// Visits the points in scan order; each free one that makes a seed grows a region. Leaves
+  /// each pixel's region in the labels, or kFree.
   void GrowAll() {
     for (std::size_t s = 0; s < n_; ++s) {
-      if (ws_.rel2[s] < 0 || ws_.visited[s]) continue;
+      if (ws_.labels[s] != kFree) continue;
       Seed seed;
       seed.s = s;
       seed.n_nb = WindowNeighbours(s, seed.nb);
@@ -146,6 +152,7 @@ class PbrgPass {
       Flush(&g);
       CloseRegion(g.sums);
     }
+    for (std::int32_t& label : ws_.labels) label = std::max(label, kFree);  // no region
   }
 
  private:
@@ -164,7 +171,7 @@ class PbrgPass {
         const int x = sx + ox;
         if ((ox == 0 && oy == 0) || x < 0 || x >= width_) continue;
         const int i = y * width_ + x;
-        if (ws_.rel2[i] < 0 || ws_.labels[i] >= 0 || ws_.visited[i]) continue;
+        if (ws_.labels[i] != kFree) continue;
         if ((pts_[i] - ps).norm() < delta_s) nb[n_nb++] = i;
       }
     }
@@ -202,10 +209,7 @@ class PbrgPass {
     ws_.members.clear();
     ws_.members.push_back(static_cast<int>(seed.s));
     for (int j = 0; j < seed.n_nb; ++j) ws_.members.push_back(seed.nb[j]);
-    for (int m : ws_.members) {
-      ws_.labels[m] = g->r;
-      ws_.visited[m] = 1;
-    }
+    for (int m : ws_.members) ws_.labels[m] = g->r;
     g->flushed = ws_.members.size();
   }
 
@@ -250,11 +254,11 @@ class PbrgPass {
   }
 
   /// Neighbour c of region point q: most are in the region already, invalid, or in R' (left
-  /// PCD, Algorithm 1 line 3), told by three loads here; the others are tested by TryJoin.
+  /// PCD, Algorithm 1 line 3), told by one load here; the others (free, or in an earlier plane)
+  /// are tested by TryJoin.
   void Consider(int q, int c, Growth* g) {
     const int owner = ws_.labels[c];
-    if (owner == g->r || ws_.rel2[c] < 0) return;
-    if (owner < 0 && ws_.visited[c]) return;
+    if (owner == g->r || owner < kFree) return;
     TryJoin(q, c, owner, g);
   }
 
@@ -266,7 +270,6 @@ class PbrgPass {
       if (i < 0 || static_cast<std::size_t>(i) >= n) continue;
       __builtin_prefetch(&ws_.labels[i]);
       __builtin_prefetch(&ws_.rel2[i]);
-      __builtin_prefetch(&ws_.visited[i]);
       __builtin_prefetch(&pts_[i]);
     }
   }
@@ -398,7 +401,6 @@ class PbrgPass {
         !TakeJointPoint(c, pc, owner, test.refitted ? g->merged_fit : g->fit, test.merged_iso))
       return;
     ws_.labels[c] = g->r;
-    ws_.visited[c] = 1;
     ws_.members.push_back(c);
     Advance(test, pc, w, g);
   }
@@ -410,7 +412,7 @@ class PbrgPass {
       ws_.regions.push_back(region);
       ws_.fits.push_back(FitSums(region));
     } else {
-      for (int m : ws_.members) ws_.labels[m] = -1;
+      for (int m : ws_.members) ws_.labels[m] = kSetAside;
       for (const auto& [point, owner] : ws_.stolen) {
         const Eigen::Vector3f& q = pts_[point];
         ws_.regions[owner].Add(q.x(), q.y(), q.z(), ws_.rel2[point]);
