@@ -8,6 +8,7 @@
 #include <future>
 #include <fstream>
 #include <unordered_map>
+#include <utility>
 
 #include "planeslam/datasets/atomic_file.hpp"
 #include "planeslam/datasets/errors.hpp"
@@ -72,6 +73,8 @@ struct OccupancyMapBuilder::Impl {
   octomap::OcTree tree;
   std::size_t frames = 0;
   std::size_t points = 0;
+  bool inner_stale = false;  ///< inserted lazily since the inner nodes were last updated
+  void InnerNodesUpToDate();
 };
 
 bool OccupancyMapBuilder::available() { return true; }
@@ -86,11 +89,96 @@ OccupancyMapBuilder::OccupancyMapBuilder(const OccupancyMapConfig& config) : con
 
 namespace {
 
-/// The cells one scan frees and occupies, as octomap::OcTree::insertPointCloud computes them. It
-/// depends only on the scan, the pose and the resolution, so scans can be ray-cast in parallel,
-/// each in its own scratch tree (a tree's ray buffer is not shared), and applied in order.
+/// An OcTreeKey packed into 48 bits (x | y << 16 | z << 32).
+std::uint64_t Pack(const octomap::OcTreeKey& k) {
+  return std::uint64_t{k[0]} | std::uint64_t{k[1]} << 16 | std::uint64_t{k[2]} << 32;
+}
+octomap::OcTreeKey Unpack(std::uint64_t p) {
+  return octomap::OcTreeKey(static_cast<octomap::key_type>(p & 0xffff),
+                            static_cast<octomap::key_type>((p >> 16) & 0xffff),
+                            static_cast<octomap::key_type>((p >> 32) & 0xffff));
+}
+
+/// Sorts 48-bit values ascending: three stable counting passes over 16-bit digits (several times
+/// faster than std::sort on the hundreds of thousands of cells a LiDAR scan frees).
+void RadixSort48(std::vector<std::uint64_t>& values) {
+  std::vector<std::uint64_t> buffer(values.size());
+  std::vector<std::size_t> start(1 << 16);
+  for (int shift = 0; shift < 48; shift += 16) {
+    std::fill(start.begin(), start.end(), 0);
+    for (std::uint64_t v : values) ++start[(v >> shift) & 0xffff];
+    std::size_t sum = 0;
+    for (std::size_t& s : start) sum += std::exchange(s, sum);
+    for (std::uint64_t v : values) buffer[start[(v >> shift) & 0xffff]++] = v;
+    values.swap(buffer);
+  }
+}
+
+/// Open-addressing set of packed keys. Ray casting a scan inserts millions of keys, most of them
+/// repeats near the sensor; octomap's KeySet (an unordered_set) allocates a node for every new key
+/// and frees them all afterwards, which made it the largest cost of building the map.
+class PackedKeySet {
+ public:
+  PackedKeySet() : slots_(1024, kEmpty), mask_(1023), shift_(54) {}
+
+  void Insert(std::uint64_t key) {
+    if (2 * (size_ + 1) > slots_.size()) Grow();
+    for (std::size_t i = Slot(key);; i = (i + 1) & mask_) {
+      if (slots_[i] == key) return;
+      if (slots_[i] == kEmpty) {
+        slots_[i] = key;
+        ++size_;
+        return;
+      }
+    }
+  }
+  bool Contains(std::uint64_t key) const {
+    for (std::size_t i = Slot(key);; i = (i + 1) & mask_) {
+      if (slots_[i] == key) return true;
+      if (slots_[i] == kEmpty) return false;
+    }
+  }
+  /// The keys in ascending order (neighbouring cells next to each other, so applying them in this
+  /// order walks the octree with its upper levels in cache).
+  std::vector<std::uint64_t> Sorted() const {
+    std::vector<std::uint64_t> keys;
+    keys.reserve(size_);
+    for (std::uint64_t k : slots_) {
+      if (k != kEmpty) keys.push_back(k);
+    }
+    RadixSort48(keys);
+    return keys;
+  }
+
+ private:
+  static constexpr std::uint64_t kEmpty = ~std::uint64_t{0};  // no packed key has the top bits
+  std::size_t Slot(std::uint64_t key) const {
+    return static_cast<std::size_t>((key * 0x9E3779B97F4A7C15ULL) >> shift_);
+  }
+  void Grow() {
+    std::vector<std::uint64_t> old(2 * slots_.size(), kEmpty);
+    old.swap(slots_);
+    mask_ = slots_.size() - 1;
+    --shift_;
+    size_ = 0;
+    for (std::uint64_t k : old) {
+      if (k != kEmpty) Insert(k);
+    }
+  }
+
+  std::vector<std::uint64_t> slots_;
+  std::size_t mask_;
+  int shift_;
+  std::size_t size_ = 0;
+};
+
+/// The cells one scan frees and occupies (packed keys, ascending, disjoint), exactly the sets
+/// octomap::OcTree::computeDiscreteUpdate computes: one ray per end voxel (to its centre), rays
+/// longer than max_range cut there and without an end voxel, end voxels removed from the free
+/// cells. It depends only on the scan, the pose and the resolution, so scans can be ray-cast in
+/// parallel and applied in order.
 struct ScanUpdate {
-  octomap::KeySet free_cells, occupied_cells;
+  std::vector<std::uint64_t> free_cells, occupied_cells;
   std::size_t points = 0;
 };
 
@@ -107,21 +195,41 @@ ScanUpdate ComputeScanUpdate(const OccupancyMapConfig& config,
       if (p.allFinite()) kept.push_back(p);
     }
   }
-  octomap::Pointcloud scan;
-  scan.reserve(kept.size());
   const Eigen::Matrix3f R = T_world_sensor.linear().cast<float>();
   const Eigen::Vector3f t = T_world_sensor.translation().cast<float>();
+  const octomap::point3d origin(t.x(), t.y(), t.z());
+  // A tree only for its key arithmetic and ray casting (no nodes are created in it).
+  const octomap::OcTree keys(config.resolution);
+  // Discretized: one ray per end voxel, cast to the voxel's centre.
+  PackedKeySet ends;
   for (const auto& p : kept) {
     const Eigen::Vector3f w = R * p + t;
-    scan.push_back(w.x(), w.y(), w.z());
+    ends.Insert(Pack(keys.coordToKey(octomap::point3d(w.x(), w.y(), w.z()))));
   }
-  const octomap::point3d origin(t.x(), t.y(), t.z());
-  // Discretized: one ray per end voxel (the downsampled points are already about one per voxel
-  // when downsample_voxel ~ resolution; with downsampling off it removes the duplicates).
-  octomap::OcTree scratch(config.resolution);
+  const double max_range = config.max_range > 0 ? config.max_range : -1.0;
+  PackedKeySet free_cells, occupied_cells;
+  octomap::KeyRay ray;
+  for (std::uint64_t end_key : ends.Sorted()) {
+    const octomap::point3d p = keys.keyToCoord(Unpack(end_key));
+    octomap::point3d ray_end = p;
+    const bool in_range = max_range < 0.0 || (p - origin).norm() <= max_range;
+    if (in_range) {
+      octomap::OcTreeKey key;
+      if (keys.coordToKeyChecked(p, key)) occupied_cells.Insert(Pack(key));
+    } else {
+      const octomap::point3d direction = (p - origin).normalized();
+      ray_end = origin + direction * static_cast<float>(max_range);
+    }
+    if (keys.computeRayKeys(origin, ray_end, ray)) {
+      for (const octomap::OcTreeKey& k : ray) free_cells.Insert(Pack(k));
+    }
+  }
   ScanUpdate update;
-  scratch.computeDiscreteUpdate(scan, origin, update.free_cells, update.occupied_cells,
-                                config.max_range > 0 ? config.max_range : -1.0);
+  update.occupied_cells = occupied_cells.Sorted();
+  update.free_cells = free_cells.Sorted();
+  update.free_cells.erase(std::remove_if(update.free_cells.begin(), update.free_cells.end(),
+                                         [&](std::uint64_t k) { return occupied_cells.Contains(k); }),
+                          update.free_cells.end());
   update.points = kept.size();
   return update;
 }
@@ -149,16 +257,27 @@ void OccupancyMapBuilder::InsertAll(const std::vector<const std::vector<Eigen::V
     while (next < scans.size() && ahead.size() < std::max(1u, threads)) launch();
     const ScanUpdate update = ahead.front().get();
     ahead.pop_front();
-    // Applied as insertPointCloud does: free cells, then occupied ones.
-    for (const auto& key : update.free_cells) impl_->tree.updateNode(key, false, false);
-    for (const auto& key : update.occupied_cells) impl_->tree.updateNode(key, true, false);
+    // Applied as insertPointCloud does, free cells then occupied ones, but lazily: each cell is
+    // updated at most once per scan, so the order within a scan does not matter, and the inner
+    // nodes (maxima of their children) are brought up to date once (InnerNodesUpToDate) instead of
+    // along the path of every cell. The leaves, and so the pruned tree, are the same.
+    for (std::uint64_t key : update.free_cells) impl_->tree.updateNode(Unpack(key), false, true);
+    for (std::uint64_t key : update.occupied_cells) impl_->tree.updateNode(Unpack(key), true, true);
     ++impl_->frames;
     impl_->points += update.points;
+    impl_->inner_stale = true;
   }
+}
+
+void OccupancyMapBuilder::Impl::InnerNodesUpToDate() {
+  if (!inner_stale) return;
+  tree.updateInnerOccupancy();
+  inner_stale = false;
 }
 
 void OccupancyMapBuilder::Write(const std::string& path) const {
   // Pruning merges children with equal values only: occupancy is unchanged and the file smaller.
+  impl_->InnerNodesUpToDate();
   impl_->tree.prune();
   datasets::AtomicOutputFile out(path, /*binary=*/true);
   // writeBinaryConst stores the maximum-likelihood state of every leaf without converting the
