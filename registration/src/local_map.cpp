@@ -273,23 +273,37 @@ const LocalVoxelMap::MapPoint* LocalVoxelMap::Nearest(const Eigen::Vector3d& q,
 const LocalVoxelMap::MapPoint* LocalVoxelMap::NearestWithin(const Eigen::Vector3d& q,
                                                             const Eigen::Matrix3d& shape,
                                                             double max_distance2) const {
+  // The query's own voxel first, then its 26 neighbours, each skipped when its box is farther
+  // than the best pair so far (exact: only points that cannot win are skipped).
   const Eigen::Vector3i key = Key(q);
+  const Eigen::Vector3d offset = q - key.cast<double>() * voxel_;  // in [0, voxel)^3
   const MapPoint* best = nullptr;
   double best_d2 = max_distance2;
+  auto visit = [&](int dx, int dy, int dz) {
+    double box2 = 0.0;
+    const int d[3] = {dx, dy, dz};
+    for (int a = 0; a < 3; ++a) {
+      const double gap = d[a] < 0 ? offset[a] : (d[a] > 0 ? voxel_ - offset[a] : 0.0);
+      box2 += gap * gap;
+    }
+    if (box2 > best_d2) return;
+    const int v = index_.Find(key + Eigen::Vector3i(dx, dy, dz));
+    if (v < 0) return;
+    for (const MapPoint& m : cells_[static_cast<std::size_t>(v)]) {
+      const double d2 = (m.position - q).squaredNorm();
+      if (!(d2 < best_d2 || (best == nullptr && d2 <= best_d2))) continue;
+      // Same kind of structure, oriented alike: ||M_a - M_b||_F = sqrt(2) sin(angle) for two
+      // surfaces (about 20 deg at 0.5), at least 1 between a surface and an edge.
+      if ((m.shape - shape).squaredNorm() > 0.25) continue;
+      best_d2 = d2;
+      best = &m;
+    }
+  };
+  visit(0, 0, 0);
   for (int dx = -1; dx <= 1; ++dx) {
     for (int dy = -1; dy <= 1; ++dy) {
       for (int dz = -1; dz <= 1; ++dz) {
-        const int v = index_.Find(key + Eigen::Vector3i(dx, dy, dz));
-        if (v < 0) continue;
-        for (const MapPoint& m : cells_[static_cast<std::size_t>(v)]) {
-          const double d2 = (m.position - q).squaredNorm();
-          if (!(d2 < best_d2 || (best == nullptr && d2 <= best_d2))) continue;
-          // Same kind of structure, oriented alike: ||M_a - M_b||_F = sqrt(2) sin(angle) for
-          // two surfaces (about 20 deg at 0.5), at least 1 between a surface and an edge.
-          if ((m.shape - shape).squaredNorm() > 0.25) continue;
-          best_d2 = d2;
-          best = &m;
-        }
+        if (dx != 0 || dy != 0 || dz != 0) visit(dx, dy, dz);
       }
     }
   }
