@@ -36,14 +36,6 @@ std::vector<ScanPoint> StructurePoints(const datasets::OrganizedCloud& cloud,
 
 namespace {
 
-struct KeyHash {
-  std::size_t operator()(const Eigen::Vector3i& v) const {
-    return static_cast<std::size_t>((static_cast<std::uint32_t>(v.x()) * 73856093u) ^
-                                    (static_cast<std::uint32_t>(v.y()) * 19349669u) ^
-                                    (static_cast<std::uint32_t>(v.z()) * 83492791u));
-  }
-};
-
 Eigen::Vector3i VoxelOf(const Eigen::Vector3d& p, double voxel) {
   return (p / voxel).array().floor().cast<int>();
 }
@@ -85,10 +77,30 @@ Eigen::Matrix3d NeighbourhoodShape(const std::vector<const ScanPoint*>& neighbou
 }  // namespace
 
 std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, double radius) {
-  std::unordered_map<Eigen::Vector3i, std::vector<int>, KeyHash> grid;
-  grid.reserve(points.size());
-  for (int i = 0; i < static_cast<int>(points.size()); ++i) {
-    grid[VoxelOf(points[i].position, radius)].push_back(i);
+  // The points bucketed by voxel of edge `radius` (counting sort, input order kept in a bucket).
+  VoxelIndex index(points.size() / 2);
+  std::vector<int> voxel_of(points.size());
+  std::vector<int> start;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    bool inserted = false;
+    voxel_of[i] = index.Insert(VoxelOf(points[i].position, radius), &inserted);
+    if (inserted) start.push_back(0);
+    ++start[static_cast<std::size_t>(voxel_of[i])];
+  }
+  int sum = 0;
+  for (int& s : start) {
+    const int count = s;
+    s = sum;
+    sum += count;
+  }
+  start.push_back(sum);
+  std::vector<int> order(points.size());
+  {
+    std::vector<int> fill(start.begin(), start.end() - 1);
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      order[static_cast<std::size_t>(fill[static_cast<std::size_t>(voxel_of[i])]++)] =
+          static_cast<int>(i);
+    }
   }
   std::vector<ShapedPoint> shaped;
   shaped.reserve(points.size());
@@ -100,12 +112,12 @@ std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, doubl
     for (int dx = -1; dx <= 1; ++dx) {
       for (int dy = -1; dy <= 1; ++dy) {
         for (int dz = -1; dz <= 1; ++dz) {
-          const auto it = grid.find(key + Eigen::Vector3i(dx, dy, dz));
-          if (it == grid.end()) continue;
-          for (int j : it->second) {
-            if ((points[j].position - points[i].position).squaredNorm() <= r2) {
-              neighbours.push_back(&points[j]);
-            }
+          const int v = index.Find(key + Eigen::Vector3i(dx, dy, dz));
+          if (v < 0) continue;
+          for (int o = start[static_cast<std::size_t>(v)]; o < start[static_cast<std::size_t>(v) + 1];
+               ++o) {
+            const ScanPoint& q = points[static_cast<std::size_t>(order[static_cast<std::size_t>(o)])];
+            if ((q.position - points[i].position).squaredNorm() <= r2) neighbours.push_back(&q);
           }
         }
       }
@@ -144,11 +156,12 @@ namespace {
 template <typename Point>
 std::vector<Point> FirstPerVoxel(const std::vector<Point>& points, double voxel) {
   if (!(voxel > 0)) return points;
-  std::unordered_map<Eigen::Vector3i, char, KeyHash> seen;
-  seen.reserve(points.size());
+  VoxelIndex seen(points.size() / 2);
   std::vector<Point> out;
   for (const auto& p : points) {
-    if (seen.emplace(VoxelOf(p.position, voxel), 1).second) out.push_back(p);
+    bool inserted = false;
+    seen.Insert(VoxelOf(p.position, voxel), &inserted);
+    if (inserted) out.push_back(p);
   }
   return out;
 }
@@ -165,7 +178,23 @@ std::vector<ShapedPoint> ThinShapedPoints(const std::vector<ShapedPoint>& points
 
 std::vector<ShapedPoint> ScanStructure(const datasets::OrganizedCloud& cloud,
                                        const std::vector<std::int32_t>* labels, double voxel) {
-  return ShapePoints(VoxelDownsample(StructurePoints(cloud, labels), 0.5 * voxel), voxel);
+  // VoxelDownsample(StructurePoints(cloud, labels), voxel / 2) in one pass over the cloud.
+  const bool use_labels = labels != nullptr && labels->size() == cloud.points.size();
+  const double thin = 0.5 * voxel;
+  VoxelIndex seen(cloud.points.size() / 16);
+  std::vector<ScanPoint> thinned;
+  thinned.reserve(cloud.points.size() / 8);
+  for (std::size_t i = 0; i < cloud.points.size(); ++i) {
+    const Eigen::Vector3f& p = cloud.points[i];
+    if (!p.allFinite() || (use_labels && (*labels)[i] >= 1)) continue;
+    const Eigen::Vector3d position = p.cast<double>();
+    bool inserted = false;
+    seen.Insert(VoxelOf(position, thin), &inserted);
+    if (!inserted) continue;
+    const int row = static_cast<int>(i / static_cast<std::size_t>(cloud.width));
+    thinned.push_back({position, row, static_cast<int>(i) - row * cloud.width});
+  }
+  return ShapePoints(thinned, voxel);
 }
 
 double ScanReach(const datasets::OrganizedCloud& cloud) {
@@ -187,8 +216,14 @@ Eigen::Vector3i LocalVoxelMap::Key(const Eigen::Vector3d& p) const { return Voxe
 
 std::size_t LocalVoxelMap::size() const {
   std::size_t n = 0;
-  for (const auto& [key, points] : voxels_) n += points.size();
+  for (const auto& cell : cells_) n += cell.size();
   return n;
+}
+
+void LocalVoxelMap::Clear() {
+  index_.Reset(0);
+  keys_.clear();
+  cells_.clear();
 }
 
 void LocalVoxelMap::Insert(const std::vector<ShapedPoint>& points_sensor,
@@ -196,42 +231,79 @@ void LocalVoxelMap::Insert(const std::vector<ShapedPoint>& points_sensor,
   const Eigen::Matrix3d R = T_world_sensor.linear();
   for (const ShapedPoint& point : points_sensor) {
     const Eigen::Vector3d p = T_world_sensor * point.position;
-    std::vector<MapPoint>& cell = voxels_[Key(p)];
+    const Eigen::Vector3i key = Key(p);
+    bool inserted = false;
+    const int v = index_.Insert(key, &inserted);
+    if (inserted) {
+      keys_.push_back(key);
+      cells_.emplace_back();
+    }
+    std::vector<MapPoint>& cell = cells_[static_cast<std::size_t>(v)];
     if (static_cast<int>(cell.size()) >= max_points_) continue;
     cell.push_back({p, R * point.shape * R.transpose()});
   }
   if (!(reach > 0)) return;
+  // Voxels out of reach are dropped; the survivors keep their order and are indexed anew.
   const Eigen::Vector3d origin = T_world_sensor.translation();
   const double limit2 = (reach + voxel_) * (reach + voxel_);
-  for (auto it = voxels_.begin(); it != voxels_.end();) {
-    if ((it->second.front().position - origin).squaredNorm() > limit2) {
-      it = voxels_.erase(it);
-    } else {
-      ++it;
+  std::size_t kept = 0;
+  for (std::size_t v = 0; v < cells_.size(); ++v) {
+    if ((cells_[v].front().position - origin).squaredNorm() > limit2) continue;
+    if (kept != v) {
+      keys_[kept] = keys_[v];
+      cells_[kept] = std::move(cells_[v]);
     }
+    ++kept;
+  }
+  if (kept == cells_.size()) return;
+  keys_.resize(kept);
+  cells_.resize(kept);
+  index_.Reset(kept);
+  for (const Eigen::Vector3i& key : keys_) {
+    bool inserted = false;
+    index_.Insert(key, &inserted);
   }
 }
 
 const LocalVoxelMap::MapPoint* LocalVoxelMap::Nearest(const Eigen::Vector3d& q,
                                                       const Eigen::Matrix3d& shape) const {
+  return NearestWithin(q, shape, std::numeric_limits<double>::infinity());
+}
+
+const LocalVoxelMap::MapPoint* LocalVoxelMap::NearestWithin(const Eigen::Vector3d& q,
+                                                            const Eigen::Matrix3d& shape,
+                                                            double max_distance2) const {
+  // The query's own voxel first, then its 26 neighbours, each skipped when its box is farther
+  // than the best pair so far (exact: only points that cannot win are skipped).
   const Eigen::Vector3i key = Key(q);
+  const Eigen::Vector3d offset = q - key.cast<double>() * voxel_;  // in [0, voxel)^3
   const MapPoint* best = nullptr;
-  double best_d2 = std::numeric_limits<double>::infinity();
+  double best_d2 = max_distance2;
+  auto visit = [&](int dx, int dy, int dz) {
+    double box2 = 0.0;
+    const int d[3] = {dx, dy, dz};
+    for (int a = 0; a < 3; ++a) {
+      const double gap = d[a] < 0 ? offset[a] : (d[a] > 0 ? voxel_ - offset[a] : 0.0);
+      box2 += gap * gap;
+    }
+    if (box2 > best_d2) return;
+    const int v = index_.Find(key + Eigen::Vector3i(dx, dy, dz));
+    if (v < 0) return;
+    for (const MapPoint& m : cells_[static_cast<std::size_t>(v)]) {
+      const double d2 = (m.position - q).squaredNorm();
+      if (!(d2 < best_d2 || (best == nullptr && d2 <= best_d2))) continue;
+      // Same kind of structure, oriented alike: ||M_a - M_b||_F = sqrt(2) sin(angle) for two
+      // surfaces (about 20 deg at 0.5), at least 1 between a surface and an edge.
+      if ((m.shape - shape).squaredNorm() > 0.25) continue;
+      best_d2 = d2;
+      best = &m;
+    }
+  };
+  visit(0, 0, 0);
   for (int dx = -1; dx <= 1; ++dx) {
     for (int dy = -1; dy <= 1; ++dy) {
       for (int dz = -1; dz <= 1; ++dz) {
-        const auto it = voxels_.find(key + Eigen::Vector3i(dx, dy, dz));
-        if (it == voxels_.end()) continue;
-        for (const MapPoint& m : it->second) {
-          // Same kind of structure, oriented alike: ||M_a - M_b||_F = sqrt(2) sin(angle) for
-          // two surfaces (about 20 deg at 0.5), at least 1 between a surface and an edge.
-          if ((m.shape - shape).squaredNorm() > 0.25) continue;
-          const double d2 = (m.position - q).squaredNorm();
-          if (d2 < best_d2) {
-            best_d2 = d2;
-            best = &m;
-          }
-        }
+        if (dx != 0 || dy != 0 || dz != 0) visit(dx, dy, dz);
       }
     }
   }
@@ -252,10 +324,14 @@ struct PairSums {
 PairSums AccumulatePairs(const LocalVoxelMap& map, const Pose& T_world_prev,
                          const std::vector<ShapedPoint>& source, const Pose& T,
                          const Eigen::MatrixXd& D, const std::vector<char>& is_translation) {
+  // At most six directions: fixed-capacity matrices keep the loop free of heap allocations.
+  using MatK = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 6, 6>;
+  using Mat3K = Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, 6>;
   const int k = static_cast<int>(D.cols());
+  MatK H = MatK::Zero(k, k);
+  Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1> g =
+      Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1>::Zero(k);
   PairSums s;
-  s.H = Eigen::MatrixXd::Zero(k, k);
-  s.g = Eigen::VectorXd::Zero(k);
   s.support.assign(k, 0);
   const Eigen::Matrix3d R_wp = T_world_prev.linear();
   const Pose T_world_curr = T_world_prev * T;
@@ -263,26 +339,28 @@ PairSums AccumulatePairs(const LocalVoxelMap& map, const Pose& T_world_prev,
   // so a correct pair's residual is mostly well inside that.
   const double huber = 0.1 * map.voxel_size();
   const double max_distance2 = map.voxel_size() * map.voxel_size();
-  Eigen::MatrixXd J(3, k);
+  const Mat3K D_t = D.topRows<3>();
+  const Mat3K D_r = D.bottomRows<3>();
+  Mat3K J(3, k), MJ(3, k);
   const Eigen::Matrix3d R_wc = T_world_curr.linear();
   for (const ShapedPoint& point : source) {
     const Eigen::Vector3d& p = point.position;
     const Eigen::Vector3d q = T_world_curr * p;
-    const LocalVoxelMap::MapPoint* m = map.Nearest(q, R_wc * point.shape * R_wc.transpose());
+    const LocalVoxelMap::MapPoint* m =
+        map.NearestWithin(q, R_wc * point.shape * R_wc.transpose(), max_distance2);
     if (m == nullptr) continue;
     const Eigen::Vector3d r = q - m->position;
-    if (r.squaredNorm() > max_distance2) continue;
     const Eigen::Matrix3d& M = m->shape;
     // d q / d(dt, dtheta) at the previous frame (geometry.hpp): R_wp [I, -[R p]_x].
     const Eigen::Vector3d rp = T.linear() * p;
-    J.noalias() = R_wp * (D.topRows<3>() - Skew(rp) * D.bottomRows<3>());
+    J.noalias() = R_wp * (D_t - Skew(rp) * D_r);
     const Eigen::Vector3d Mr = M * r;
     const double e2 = r.dot(Mr);
     const double e = std::sqrt(e2);
     const double w = e <= huber ? 1.0 : huber / e;
-    const Eigen::MatrixXd MJ = M * J;
-    s.H.noalias() += w * J.transpose() * MJ;
-    s.g.noalias() += w * J.transpose() * Mr;
+    MJ.noalias() = M * J;
+    H.noalias() += w * J.transpose() * MJ;
+    g.noalias() += w * J.transpose() * Mr;
     const double lever = std::max(rp.norm(), 1e-9);
     for (int i = 0; i < k; ++i) {
       const double moved = std::sqrt(std::max(0.0, J.col(i).dot(MJ.col(i))));
@@ -291,6 +369,8 @@ PairSums AccumulatePairs(const LocalVoxelMap& map, const Pose& T_world_prev,
     ++s.count;
     s.sum_sq += e2;
   }
+  s.H = H;
+  s.g = g;
   return s;
 }
 

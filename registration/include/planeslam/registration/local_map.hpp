@@ -18,11 +18,11 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 #include "planeslam/datasets/organized_cloud.hpp"
 #include "planeslam/registration/plane_registration.hpp"
+#include "planeslam/registration/voxel_index.hpp"
 
 namespace planeslam::registration {
 
@@ -97,25 +97,22 @@ class LocalVoxelMap {
   /// The nearest map point to q (world) among the 27 voxels around it whose shape agrees with
   /// `shape` (world; same kind, axes within about 20 deg), or null.
   const MapPoint* Nearest(const Eigen::Vector3d& q, const Eigen::Matrix3d& shape) const;
+  /// Nearest() limited to map points within sqrt(max_distance2) of q (null when none is).
+  const MapPoint* NearestWithin(const Eigen::Vector3d& q, const Eigen::Matrix3d& shape,
+                                double max_distance2) const;
   double voxel_size() const { return voxel_; }
-  bool empty() const { return voxels_.empty(); }
+  bool empty() const { return cells_.empty(); }
   std::size_t size() const;
-  void Clear() { voxels_.clear(); }
+  void Clear();
 
  private:
-  struct VoxelHash {
-    std::size_t operator()(const Eigen::Vector3i& v) const {
-      // The spatial hash of Teschner et al. 2003, as KISS-ICP and OpenVDB use.
-      return static_cast<std::size_t>((static_cast<std::uint32_t>(v.x()) * 73856093u) ^
-                                      (static_cast<std::uint32_t>(v.y()) * 19349669u) ^
-                                      (static_cast<std::uint32_t>(v.z()) * 83492791u));
-    }
-  };
   Eigen::Vector3i Key(const Eigen::Vector3d& p) const;
 
   double voxel_;
   int max_points_;
-  std::unordered_map<Eigen::Vector3i, std::vector<MapPoint>, VoxelHash> voxels_;
+  VoxelIndex index_;                         ///< voxel -> index into keys_ and cells_
+  std::vector<Eigen::Vector3i> keys_;        ///< per voxel, in order of creation
+  std::vector<std::vector<MapPoint>> cells_;  ///< per voxel, its points
 };
 
 struct MapAlignmentResult {

@@ -1,0 +1,41 @@
+// The local map's voxel hash against std::unordered_map on random keys, through growth.
+#include "planeslam/registration/voxel_index.hpp"
+
+#include <gtest/gtest.h>
+
+#include <map>
+#include <random>
+#include <tuple>
+
+namespace planeslam::registration {
+namespace {
+
+TEST(LocalMapVoxelIndex, AgreesWithAStandardMapOnRandomKeys) {
+  std::mt19937 rng(7);
+  for (const int spread : {3, 40, 100000}) {  // dense repeats to nearly unique keys
+    std::uniform_int_distribution<int> coord(-spread, spread);
+    VoxelIndex index(4);  // grows many times
+    std::map<std::tuple<int, int, int>, int> reference;
+    for (int i = 0; i < 20000; ++i) {
+      const Eigen::Vector3i key(coord(rng), coord(rng), coord(rng));
+      bool inserted = false;
+      const int got = index.Insert(key, &inserted);
+      const auto [it, fresh] =
+          reference.emplace(std::make_tuple(key.x(), key.y(), key.z()),
+                            static_cast<int>(reference.size()));
+      ASSERT_EQ(inserted, fresh);
+      ASSERT_EQ(got, it->second);
+    }
+    EXPECT_EQ(index.size(), static_cast<int>(reference.size()));
+    for (const auto& [key, value] : reference) {
+      EXPECT_EQ(index.Find({std::get<0>(key), std::get<1>(key), std::get<2>(key)}), value);
+    }
+    EXPECT_EQ(index.Find({spread + 1, 0, 0}), -1);
+    index.Reset(0);
+    EXPECT_EQ(index.size(), 0);
+    EXPECT_EQ(index.Find({0, 0, 0}), -1);
+  }
+}
+
+}  // namespace
+}  // namespace planeslam::registration
