@@ -1,6 +1,7 @@
 // `planeslam run [SEQUENCE]`: offline plane SLAM over a sequence (or the built-in synthetic room),
 // writing the trajectory, the plane map, the pose graph, an optional OctoMap and, with ground
 // truth, its own scores.
+#include <malloc.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -240,6 +241,12 @@ class RunCommand : public Command {
     std::cerr << "planeslam run: " << input.name << ", " << indices.size() << " frames, detector "
               << session.detector().Name() << "\n";
     InstallInterruptHandlers();
+#ifdef __GLIBC__
+    // glibc gives each worker thread its own malloc arena, which keeps the frame-sized buffers
+    // that thread freed, so peak memory would grow with the thread count. One shared arena reuses
+    // them; small blocks still come from the per-thread caches.
+    if (session.threads() > 1) mallopt(M_ARENA_MAX, 1);
+#endif
     ProcessFrames(input, indices, options_.quiet, session);
     if (session.frames_done() == 0) {
       throw IoError(input.name, "interrupted before the first frame: nothing written");

@@ -1,5 +1,6 @@
-// PCL baselines for `planeslam bench`. The only translation unit of the app that includes PCL's
-// segmentation/registration headers (they take long to compile).
+// PCL baselines for `planeslam bench`, built as the plugin libplaneslam_pcl.so (see baselines.hpp):
+// the only translation unit of the app that includes PCL's segmentation/registration headers
+// (they take long to compile).
 #include "pcl/baselines.hpp"
 
 #include <pcl/console/print.h>
@@ -72,7 +73,31 @@ class ReusingGicp : public pcl::GeneralizedIterativeClosestPoint<pcl::PointXYZ, 
 
 }  // namespace
 
-OmpsDetector::OmpsDetector(OmpsConfig config) : config_(std::move(config)) {
+/// OmpsDetector's implementation.
+class OmpsPcl : public detection::PlaneDetector {
+ public:
+  explicit OmpsPcl(OmpsConfig config);
+  std::string Name() const override { return "pcl_omps"; }
+  detection::Segmentation Detect(const datasets::OrganizedCloud& cloud) const override;
+
+ private:
+  OmpsConfig config_;
+};
+
+/// GicpOdometry's implementation.
+class GicpPcl : public GicpBackend {
+ public:
+  explicit GicpPcl(GicpConfig config);
+  GicpStep Track(const datasets::OrganizedCloud& cloud) override;
+  void Reset() override;
+
+ private:
+  struct State;
+  GicpConfig config_;
+  std::unique_ptr<State> state_;
+};
+
+OmpsPcl::OmpsPcl(OmpsConfig config) : config_(std::move(config)) {
   PLANESLAM_CHECK(config_.normal_method == "covariance" ||
                       config_.normal_method == "average_3d_gradient",
                   "unknown normal method " << config_.normal_method);
@@ -81,7 +106,7 @@ OmpsDetector::OmpsDetector(OmpsConfig config) : config_(std::move(config)) {
   pcl::console::setVerbosityLevel(pcl::console::L_ERROR);
 }
 
-detection::Segmentation OmpsDetector::Detect(const datasets::OrganizedCloud& cloud) const {
+detection::Segmentation OmpsPcl::Detect(const datasets::OrganizedCloud& cloud) const {
   detection::Segmentation seg;
   seg.width = cloud.width;
   seg.height = cloud.height;
@@ -151,22 +176,20 @@ detection::Segmentation OmpsDetector::Detect(const datasets::OrganizedCloud& clo
   return seg;
 }
 
-struct GicpOdometry::State {
+struct GicpPcl::State {
   pcl::PointCloud<pcl::PointXYZ>::Ptr previous;
   ReusingGicp::MatricesVectorPtr previous_covariances;
   Pose velocity = Pose::Identity();  ///< last T_prev_curr, the constant-velocity prior
 };
 
-GicpOdometry::GicpOdometry(GicpConfig config)
+GicpPcl::GicpPcl(GicpConfig config)
     : config_(config), state_(std::make_unique<State>()) {
   PLANESLAM_CHECK(config_.voxel_size > 0.0, "voxel_size " << config_.voxel_size);
 }
 
-GicpOdometry::~GicpOdometry() = default;
+void GicpPcl::Reset() { state_ = std::make_unique<State>(); }
 
-void GicpOdometry::Reset() { state_ = std::make_unique<State>(); }
-
-GicpStep GicpOdometry::Track(const datasets::OrganizedCloud& cloud) {
+GicpStep GicpPcl::Track(const datasets::OrganizedCloud& cloud) {
   GicpStep step;
   const pcl::PointCloud<pcl::PointXYZ>::Ptr valid = ToPclValid(cloud, config_.max_range);
   const auto t0 = Clock::now();
@@ -226,3 +249,19 @@ GicpStep GicpOdometry::Track(const datasets::OrganizedCloud& cloud) {
 }
 
 }  // namespace planeslam::app::pcl_baselines
+
+namespace pb = planeslam::app::pcl_baselines;
+
+extern "C" {
+__attribute__((visibility("default"))) int planeslam_pcl_plugin_abi() { return pb::kPluginAbi; }
+
+__attribute__((visibility("default"))) planeslam::detection::PlaneDetector*
+planeslam_pcl_make_omps(const pb::OmpsConfig* config) {
+  return new pb::OmpsPcl(*config);
+}
+
+__attribute__((visibility("default"))) pb::GicpBackend* planeslam_pcl_make_gicp(
+    const pb::GicpConfig* config) {
+  return new pb::GicpPcl(*config);
+}
+}

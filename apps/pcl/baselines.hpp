@@ -2,9 +2,12 @@
 /// In-process PCL baselines for `planeslam bench`: PCL's OrganizedMultiPlaneSegmentation (plane
 /// detection) and GeneralizedIterativeClosestPoint (frame-to-frame odometry).
 ///
-/// This header is PCL-free on purpose: PCL's headers are slow to compile, so every PCL include lives
-/// in apps/pcl/baselines.cpp. Code outside apps/pcl/ must guard its use with
-/// `#ifdef PLANESLAM_HAVE_PCL_BASELINES` (the library is only built when PCL is found).
+/// This header is PCL-free on purpose. The PCL code (apps/pcl/baselines.cpp) is built into a
+/// plugin, libplaneslam_pcl.so next to the executable, that OmpsDetector and GicpOdometry load
+/// with dlopen when they are first constructed (apps/pcl_plugin.cpp): the executable does not
+/// link PCL, whose 40-odd shared libraries would otherwise be loaded and relocated at every start.
+/// Code outside apps/pcl/ must guard its use with `#ifdef PLANESLAM_HAVE_PCL_BASELINES` (the
+/// plugin is only built when PCL is found).
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -48,15 +51,18 @@ struct OmpsConfig {
 /// pixels with detection::PlaneMoments, so normal orientation (d >= 0) matches ours.
 /// Segmentation::timings_ms holds "convert", "normals", "segment", "output"; benchmarks should time
 /// only "normals" + "segment" (PCL's own work) to be conservative.
+/// Throws IoError naming the plugin when it cannot be loaded, CheckError on invalid settings.
 class OmpsDetector : public detection::PlaneDetector {
  public:
   explicit OmpsDetector(OmpsConfig config = {});
+  ~OmpsDetector() override;
   std::string Name() const override { return "pcl_omps"; }
   detection::Segmentation Detect(const datasets::OrganizedCloud& cloud) const override;
   const OmpsConfig& config() const { return config_; }
 
  private:
   OmpsConfig config_;
+  std::unique_ptr<detection::PlaneDetector> impl_;  ///< the plugin's detector
 };
 
 /// Settings of the PCL GICP odometry baseline.
@@ -82,6 +88,17 @@ struct GicpStep {
 /// motion estimated for frame k-1 (identity for the first pair), as in our PlaneOdometry. The
 /// previous frame's downsampled cloud and point covariances are kept and reused as the target, so
 /// every frame's covariances are computed once (the fair, fast way to run PCL's GICP).
+/// The plugin implements it; GicpOdometry forwards to it.
+class GicpBackend {
+ public:
+  virtual ~GicpBackend() = default;
+  /// Feeds the next frame. The first call returns identity with converged = true.
+  virtual GicpStep Track(const datasets::OrganizedCloud& cloud) = 0;
+  /// Forgets the previous frame and the velocity.
+  virtual void Reset() = 0;
+};
+
+/// Throws IoError naming the plugin when it cannot be loaded, CheckError on invalid settings.
 class GicpOdometry {
  public:
   explicit GicpOdometry(GicpConfig config = {});
@@ -95,9 +112,21 @@ class GicpOdometry {
   void Reset();
 
  private:
-  struct State;
-  GicpConfig config_;
-  std::unique_ptr<State> state_;
+  std::unique_ptr<GicpBackend> impl_;
 };
 
+/// Version of the interface between the executable and the plugin; a plugin built against another
+/// one is refused (a stale build).
+constexpr int kPluginAbi = 1;
+
 }  // namespace planeslam::app::pcl_baselines
+
+/// The plugin's entry points, looked up by name with dlsym. The objects they return are owned by
+/// the caller; errors are thrown as exceptions (both sides are built with the same compiler).
+extern "C" {
+int planeslam_pcl_plugin_abi();
+planeslam::detection::PlaneDetector* planeslam_pcl_make_omps(
+    const planeslam::app::pcl_baselines::OmpsConfig* config);
+planeslam::app::pcl_baselines::GicpBackend* planeslam_pcl_make_gicp(
+    const planeslam::app::pcl_baselines::GicpConfig* config);
+}

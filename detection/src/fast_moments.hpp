@@ -183,27 +183,34 @@ struct MomentSums {
   PlaneMoments ToPlaneMoments() const;
 };
 
-/// Whether m.MseAbout(n) < params.Epsilon(m.ExpectedMse(n), m.k): the growers' test of a join
-/// between refits, once per tested grid or point. The same inequality without a division or a
+/// Whether m.MseAbout(n) < params.Epsilon(m.ExpectedMse(n), m.k), given K = k, n^T Q n = nqn,
+/// n.S = ns and n^T W n = nwn of the sums m: the growers' test of a join between refits, once per
+/// tested grid or point. The same inequality without a division or a
 /// square root, whose latencies chain through every test: with M the MSE about n, E the expected
 /// MSE, eps the base epsilon and s its sigmas, M < (sqrt(eps) + s sqrt(E))^2 holds iff
 /// D = M - eps - s^2 E < 2 s sqrt(eps E), i.e. D < 0 or D^2 < 4 s^2 eps E; both sides are
 /// multiplied by K^2 (resp. K^4) to drop the divisions. Equal to the plain test but for rounding
 /// (~1e-16 relative) at the boundary.
-inline bool MseAboutWithinEpsilon(const MomentSums& m, const Eigen::Vector3d& n,
+inline bool MseAboutWithinEpsilon(double k, double nqn, double ns, double nwn,
                                   const DetectionParams& params) {
-  const double k = m.k;
   if (!(k > 0)) return false;  // no points: the plain test's MSE is undefined (NaN), it rejects
-  double nqn, ns;
-  m.AlongNormal(n, nqn, ns);
   const double k2_mse = std::max(0.0, k * nqn - ns * ns);  // K^2 MseAbout(n)
   const double k2 = k * k;
   if (params.model != ThresholdModel::kDepth) return k2_mse < params.epsilon * k2;
   const double sigmas = params.EpsilonSigmas(k);
-  const double k2_expected = std::max(0.0, k * m.NoiseAlong(n));  // K^2 ExpectedMse(n)
+  const double k2_expected = std::max(0.0, k * nwn);  // K^2 ExpectedMse(n)
   const double s2 = sigmas * sigmas;
   const double k2_d = k2_mse - params.epsilon * k2 - s2 * k2_expected;
   return k2_d < 0.0 || k2_d * k2_d < 4.0 * s2 * params.epsilon * k2_expected * k2;
+}
+/// The same test from the moment sums: n^T Q n, n.S and n^T W n formed from them.
+inline bool MseAboutWithinEpsilon(const MomentSums& m, const Eigen::Vector3d& n,
+                                  const DetectionParams& params) {
+  if (!(m.k > 0)) return false;
+  double nqn, ns;
+  m.AlongNormal(n, nqn, ns);
+  const double nwn = params.model == ThresholdModel::kDepth ? m.NoiseAlong(n) : 0.0;
+  return MseAboutWithinEpsilon(m.k, nqn, ns, nwn, params);
 }
 
 /// Normal equations of the ray fit of one region: 1/s_i = m.q_i with q_i = p_i / s_i the ray

@@ -19,10 +19,15 @@ double Ms(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
 }
 
+/// A pixel's state in Workspace::labels besides its region (>= 0): free (valid, in no region
+/// yet), set aside (in a region too small to keep: R', never a seed or a member again), invalid.
+/// One load tells a neighbour's state; the set-aside and invalid pixels become kFree (no region)
+/// for the output.
+constexpr std::int32_t kFree = -1, kSetAside = -2, kInvalid = -3;
+
 struct Workspace {
-  std::vector<std::int32_t> labels;   ///< region index (accepted or growing), -1 none
-  std::vector<std::uint8_t> visited;  ///< in some region, accepted or not: never a seed again
-  std::vector<float> rel2;            ///< (sigma(z)/z)^2 per pixel
+  std::vector<std::int32_t> labels;  ///< region index (accepted or growing), or a state above
+  std::vector<float> rel2;           ///< (sigma(z)/z)^2 per pixel
   std::vector<int> members;
   std::vector<MomentSums> regions;
   std::vector<FastFit> fits;                ///< of accepted regions, at acceptance
@@ -38,26 +43,62 @@ struct Seed {
   FastFit fit;
 };
 
+/// What the join tests between refits read of a point set: its moments along the region's
+/// current normal n (K, n^T Q n, n.S, n^T W n) and trace(W). Five sums instead of sixteen per
+/// join; MomentSums's figures of the same name from them.
+struct NormalSums {
+  double k = 0, nqn = 0, ns = 0, nwn = 0, trace_w = 0;
+
+  void Set(const MomentSums& m, const Eigen::Vector3d& n) {
+    k = m.k;
+    m.AlongNormal(n, nqn, ns);
+    nwn = m.NoiseAlong(n);
+    trace_w = m.wxx + m.wyy + m.wzz;
+  }
+  /// Adds point p of relative noise w.
+  void Add(const Eigen::Vector3d& n, const Eigen::Vector3d& p, double w) {
+    const double t = n.dot(p);
+    k += 1.0;
+    nqn += t * t;
+    ns += t;
+    nwn += w * (t * t);
+    trace_w += w * p.squaredNorm();
+  }
+  double IsotropicMse() const { return k > 0 ? trace_w / k : 0.0; }
+  double NormalTilt(double l2) const {
+    return 2.0 * std::sqrt(IsotropicMse() / std::max(l2, 1e-30));
+  }
+  double MseAbout() const { return std::max(0.0, nqn - ns * ns / k) / k; }
+  double EffectiveMse(double tilt) const {
+    const double iso = IsotropicMse();
+    const double expected = k > 0 ? nwn / k : 0.0;
+    const double s = std::sqrt(std::max(expected, 0.0)) +
+                     std::sqrt(iso) * std::min(1.0, std::max(tilt, 0.0));
+    return std::min(s * s, iso);
+  }
+};
+
 /// A region while it grows: its index, moments, current plane and joins since the last refit.
-/// The moments with a tested point added are formed in the spare of two buffers, which becomes
-/// the region's on a join (no copy either way).
+/// Between refits a join adds the point to the sums along the current normal only; the full
+/// moments take the members joined since (members from `flushed` on) when a refit needs them,
+/// in join order, so they are the same sums as those added one join at a time.
 struct Growth {
   int r = 0;
-  MomentSums sums[2];
-  int current = 0;
+  MomentSums sums;         ///< moments of the members before `flushed`
+  std::size_t flushed = 0;
+  NormalSums along;        ///< of every member, along fit.normal
+  MomentSums merged;       ///< scratch: the full moments with a tested point
+  FastFit merged_fit;      ///< scratch: the plane of `merged`
   FastFit fit;
   double since_refit = 0;
-
-  const MomentSums& Region() const { return sums[current]; }
-  MomentSums& Spare() { return sums[current ^ 1]; }
-  void TakeSpare() { current ^= 1; }
 };
 
 /// Outcome of the join test of one point.
 struct JoinTest {
   bool accept = false;
-  bool refitted = false;  ///< new_fit holds the plane of the region with the point
-  FastFit new_fit;
+  /// Growth::merged and merged_fit hold the region with the point and its plane.
+  bool refitted = false;
+  double merged_iso = 0;  ///< isotropic MSE of the region with the point
 };
 
 /// One PBRG pass over a cloud: the per-pixel state in the workspace and the steps of
@@ -78,13 +119,13 @@ class PbrgPass {
 
   /// Resets the workspace and computes each point's relative noise (sigma(z)/z)^2, -1 when invalid.
   void Prepare() {
-    ws_.labels.assign(n_, -1);
-    ws_.visited.assign(n_, 0);
+    ws_.labels.assign(n_, kFree);
     ws_.rel2.resize(n_);
     for (std::size_t i = 0; i < n_; ++i) {
       const Eigen::Vector3f& p = pts_[i];
       if (!std::isfinite(p.z())) {
-        ws_.rel2[i] = -1.0f;  // invalid
+        ws_.rel2[i] = -1.0f;
+        ws_.labels[i] = kInvalid;
         continue;
       }
       const double z = internal::PointDepth(p, spherical_);
@@ -95,19 +136,23 @@ class PbrgPass {
     ws_.fits.clear();
   }
 
-  /// Visits the points in scan order; each unvisited one that makes a seed grows a region.
+  /// Visits the points in scan order; each free one that makes a seed grows a region. Leaves
+  /// each pixel's region in the labels, or kFree.
   void GrowAll() {
     for (std::size_t s = 0; s < n_; ++s) {
-      if (ws_.rel2[s] < 0 || ws_.visited[s]) continue;
+      if (ws_.labels[s] != kFree) continue;
       Seed seed;
       seed.s = s;
       seed.n_nb = WindowNeighbours(s, seed.nb);
       if (seed.n_nb < point_.seed_neighbours) continue;
       if (!PlanarSeed(&seed)) continue;
-      Growth g = StartRegion(seed);
+      Growth& g = growth_;
+      StartRegion(seed, &g);
       Grow(&g);
-      CloseRegion(g.Region());
+      Flush(&g);
+      CloseRegion(g.sums);
     }
+    for (std::int32_t& label : ws_.labels) label = std::max(label, kFree);  // no region
   }
 
  private:
@@ -126,7 +171,7 @@ class PbrgPass {
         const int x = sx + ox;
         if ((ox == 0 && oy == 0) || x < 0 || x >= width_) continue;
         const int i = y * width_ + x;
-        if (ws_.rel2[i] < 0 || ws_.labels[i] >= 0 || ws_.visited[i]) continue;
+        if (ws_.labels[i] != kFree) continue;
         if ((pts_[i] - ps).norm() < delta_s) nb[n_nb++] = i;
       }
     }
@@ -155,19 +200,34 @@ class PbrgPass {
   }
 
   /// Labels the seed and its neighbours as the next region (Algorithm 1 line 6).
-  Growth StartRegion(const Seed& seed) {
-    Growth g;
-    g.r = static_cast<int>(ws_.regions.size());
-    g.sums[0] = seed.region;
-    g.fit = seed.fit;
+  void StartRegion(const Seed& seed, Growth* g) {
+    g->r = static_cast<int>(ws_.regions.size());
+    g->sums = seed.region;
+    g->fit = seed.fit;
+    g->since_refit = 0;
+    g->along.Set(g->sums, g->fit.normal);
     ws_.members.clear();
     ws_.members.push_back(static_cast<int>(seed.s));
     for (int j = 0; j < seed.n_nb; ++j) ws_.members.push_back(seed.nb[j]);
-    for (int m : ws_.members) {
-      ws_.labels[m] = g.r;
-      ws_.visited[m] = 1;
+    for (int m : ws_.members) ws_.labels[m] = g->r;
+    g->flushed = ws_.members.size();
+  }
+
+  /// Adds the members joined since the last flush to the region's full moments.
+  void Flush(Growth* g) const {
+    const std::size_t end = ws_.members.size();
+    if (g->flushed == end) return;
+    // Summed in a local copy: through the pointer, every sum would be loaded and stored again
+    // for each point.
+    MomentSums sums = g->sums;
+    const int* const members = ws_.members.data();
+    for (std::size_t i = g->flushed; i < end; ++i) {
+      const int m = members[i];
+      const Eigen::Vector3d p = pts_[m].cast<double>();
+      sums.Add(p.x(), p.y(), p.z(), ws_.rel2[m]);
     }
-    return g;
+    g->sums = sums;
+    g->flushed = end;
   }
 
   /// Breadth-first growth over 4-neighbours (Algorithm 1 lines 7-12), right, left, down, up.
@@ -194,11 +254,11 @@ class PbrgPass {
   }
 
   /// Neighbour c of region point q: most are in the region already, invalid, or in R' (left
-  /// PCD, Algorithm 1 line 3), told by three loads here; the others are tested by TryJoin.
+  /// PCD, Algorithm 1 line 3), told by one load here; the others (free, or in an earlier plane)
+  /// are tested by TryJoin.
   void Consider(int q, int c, Growth* g) {
     const int owner = ws_.labels[c];
-    if (owner == g->r || ws_.rel2[c] < 0) return;
-    if (owner < 0 && ws_.visited[c]) return;
+    if (owner == g->r || owner < kFree) return;
     TryJoin(q, c, owner, g);
   }
 
@@ -210,17 +270,17 @@ class PbrgPass {
       if (i < 0 || static_cast<std::size_t>(i) >= n) continue;
       __builtin_prefetch(&ws_.labels[i]);
       __builtin_prefetch(&ws_.rel2[i]);
-      __builtin_prefetch(&ws_.visited[i]);
       __builtin_prefetch(&pts_[i]);
     }
   }
 
-  /// Tolerance on the distance of point c (at pc) to plane f of moments m: point noise along the
+  /// Tolerance on the distance of point c (at pc) to plane f: point noise along the
   /// normal (sigma |n.p| / z), and for a young region the normal's own uncertainty times the lever
   /// arm from the centroid (as in GBRG).
-  double GammaFor(const FastFit& f, const MomentSums& m, int c, const Eigen::Vector3d& pc) const {
+  /// `iso` is the isotropic MSE of the plane's points (MomentSums::IsotropicMse).
+  double GammaFor(const FastFit& f, double iso, int c, const Eigen::Vector3d& pc) const {
     if (!depth_model_) return params_.gamma;
-    const double tilt = std::min(1.0, m.NormalTilt(f.l2));
+    const double tilt = std::min(1.0, 2.0 * std::sqrt(iso / std::max(f.l2, 1e-30)));
     const double sn = std::sqrt(ws_.rel2[c]) * std::abs(f.normal.dot(pc));
     if (tilt <= 0.02) return params_.Gamma(sn);  // a sharp normal: no lever-arm term
     const Eigen::Vector3d diff = pc - f.centroid;
@@ -240,46 +300,53 @@ class PbrgPass {
   /// Its bound is at least its cheap part, the base gamma: within that, no roots needed.
   bool NearCurrentPlane(int c, const Eigen::Vector3d& pc, const Growth& g) const {
     const double dist = std::abs(g.fit.normal.dot(pc) - g.fit.d);
-    return dist < params_.gamma || dist < GammaFor(g.fit, g.Region(), c, pc);
+    return dist < params_.gamma || dist < GammaFor(g.fit, g.along.IsotropicMse(), c, pc);
   }
 
-  /// The join test of point c (at pc) for region `g`, `merged` being g's moments with c added
-  /// (Algorithm 1 line 9). Between refits (refit_interval != 1), c has passed NearCurrentPlane.
-  JoinTest TestJoin(int c, const Eigen::Vector3d& pc, const Growth& g,
-                    const MomentSums& merged) const {
+  /// The join test of point c (at pc, relative noise w) for region `g` (Algorithm 1 line 9).
+  /// Between refits (refit_interval != 1), c has passed NearCurrentPlane. A refitting test
+  /// leaves g's moments with c added in g->merged and their plane in g->merged_fit.
+  JoinTest TestJoin(int c, const Eigen::Vector3d& pc, double w, Growth* g) const {
     JoinTest test;
-    const FastFit& fit = g.fit;
+    const FastFit& fit = g->fit;
+    if (point_.refit_interval != 1) {
+      // MSE bound about the current normal, from the sums along it. The bound is at least its
+      // cheap part (epsilon of the noise along the normal alone, which the tilt term only
+      // raises): within that, no roots.
+      NormalSums m = g->along;
+      m.Add(fit.normal, pc, w);
+      if (MseAboutWithinEpsilon(m.k, m.nqn, m.ns, m.nwn, params_) ||
+          m.MseAbout() < params_.Epsilon(m.EffectiveMse(m.NormalTilt(fit.l2)), m.k)) {
+        test.accept = true;
+        test.merged_iso = m.IsotropicMse();
+        return test;
+      }
+    }
+    Flush(g);
+    MomentSums& merged = g->merged;
+    merged.SetSum(g->sums, pc.x(), pc.y(), pc.z(), w);
+    FastFit& new_fit = g->merged_fit;
+    new_fit = RefitFrom(merged, fit.normal);
+    test.refitted = true;
+    test.merged_iso = merged.IsotropicMse();
+    test.accept = MseWithinEpsilon(new_fit.mse, merged, new_fit.normal, new_fit.l2);
     if (point_.refit_interval == 1) {
       // The paper's test: distance and MSE against the plane refitted with the point.
-      test.new_fit = RefitFrom(merged, fit.normal);
-      test.refitted = true;
-      const double dist = std::abs(test.new_fit.normal.dot(pc) - test.new_fit.d);
-      test.accept =
-          dist < GammaFor(test.new_fit, merged, c, pc) &&
-          MseWithinEpsilon(test.new_fit.mse, merged, test.new_fit.normal, test.new_fit.l2);
-      return test;
+      const double dist = std::abs(new_fit.normal.dot(pc) - new_fit.d);
+      test.accept = test.accept && dist < GammaFor(new_fit, test.merged_iso, c, pc);
     }
-    // MSE bound about the current normal. The bound is at least its cheap part (epsilon of the
-    // noise along the normal alone, which the tilt term only raises): within that, no roots.
-    if (MseAboutWithinEpsilon(merged, fit.normal, params_) ||
-        MseWithinEpsilon(merged.MseAbout(fit.normal), merged, fit.normal, fit.l2)) {
-      test.accept = true;
-      return test;
-    }
-    test.new_fit = RefitFrom(merged, fit.normal);
-    test.refitted = true;
-    test.accept = MseWithinEpsilon(test.new_fit.mse, merged, test.new_fit.normal, test.new_fit.l2);
     return test;
   }
 
   /// A joint point c already in an earlier plane `owner` (the paper's shared points) stays with
   /// the plane it fits best, in units of each plane's tolerance at that point. Returns true when
-  /// the growing region (plane `cur`, moments `merged`) takes it; its moments then leave `owner`.
+  /// the growing region (plane `cur`, isotropic MSE `merged_iso` with the point) takes it; its
+  /// moments then leave `owner`.
   bool TakeJointPoint(int c, const Eigen::Vector3d& pc, int owner, const FastFit& cur,
-                      const MomentSums& merged) {
+                      double merged_iso) {
     const FastFit& old = ws_.fits[owner];
-    const double t_new = GammaFor(cur, merged, c, pc),
-                 t_old = GammaFor(old, ws_.regions[owner], c, pc);
+    const double t_new = GammaFor(cur, merged_iso, c, pc),
+                 t_old = GammaFor(old, ws_.regions[owner].IsotropicMse(), c, pc);
     if (std::abs(old.normal.dot(pc) - old.d) / t_old <=
         std::abs(cur.normal.dot(pc) - cur.d) / t_new)
       return false;
@@ -290,22 +357,27 @@ class PbrgPass {
     return true;
   }
 
-  /// Takes the spare moments (the region with the point) as the region's and updates its plane:
-  /// the refitted one when the test refitted, else a refit every refit_interval joins (adaptive:
-  /// every max(1, K/64)).
-  void Advance(const JoinTest& test, Growth* g) const {
-    g->TakeSpare();
+  /// Adds the point just appended to the members (at pc, relative noise w) to the region and
+  /// updates its plane: the refitted one when the test refitted, else a refit every
+  /// refit_interval joins (adaptive: every max(1, K/64)).
+  void Advance(const JoinTest& test, const Eigen::Vector3d& pc, double w, Growth* g) const {
     g->since_refit += 1.0;
     if (test.refitted) {
-      g->fit = test.new_fit;
+      std::swap(g->sums, g->merged);
+      g->flushed = ws_.members.size();
+      g->fit = g->merged_fit;
+      g->along.Set(g->sums, g->fit.normal);
       g->since_refit = 0;
       return;
     }
+    g->along.Add(g->fit.normal, pc, w);
     const int refit_interval = point_.refit_interval;
     const double interval =
-        refit_interval > 0 ? refit_interval : std::max(1.0, g->Region().k / 64.0);
+        refit_interval > 0 ? refit_interval : std::max(1.0, g->along.k / 64.0);
     if (g->since_refit >= interval) {
-      g->fit = RefitFrom(g->Region(), g->fit.normal);
+      Flush(g);
+      g->fit = RefitFrom(g->sums, g->fit.normal);
+      g->along.Set(g->sums, g->fit.normal);
       g->since_refit = 0;
     }
   }
@@ -322,16 +394,15 @@ class PbrgPass {
     // Between refits the distance to the current plane turns most points away before their
     // merged moments are formed.
     if (point_.refit_interval != 1 && !NearCurrentPlane(c, pc, *g)) return;
-    MomentSums& merged = g->Spare();
-    merged.SetSum(g->Region(), pc.x(), pc.y(), pc.z(), ws_.rel2[c]);
-    const JoinTest test = TestJoin(c, pc, *g, merged);
+    const double w = ws_.rel2[c];
+    const JoinTest test = TestJoin(c, pc, w, g);
     if (!test.accept) return;
-    if (owner >= 0 && !TakeJointPoint(c, pc, owner, test.refitted ? test.new_fit : g->fit, merged))
+    if (owner >= 0 &&
+        !TakeJointPoint(c, pc, owner, test.refitted ? g->merged_fit : g->fit, test.merged_iso))
       return;
-    Advance(test, g);
     ws_.labels[c] = g->r;
-    ws_.visited[c] = 1;
     ws_.members.push_back(c);
+    Advance(test, pc, w, g);
   }
 
   /// Keeps a grown region of at least theta points as a plane (R); a smaller one goes to R' (its
@@ -341,7 +412,7 @@ class PbrgPass {
       ws_.regions.push_back(region);
       ws_.fits.push_back(FitSums(region));
     } else {
-      for (int m : ws_.members) ws_.labels[m] = -1;
+      for (int m : ws_.members) ws_.labels[m] = kSetAside;
       for (const auto& [point, owner] : ws_.stolen) {
         const Eigen::Vector3f& q = pts_[point];
         ws_.regions[owner].Add(q.x(), q.y(), q.z(), ws_.rel2[point]);
@@ -359,6 +430,7 @@ class PbrgPass {
   int width_, height_;
   bool spherical_;
   bool depth_model_;
+  Growth growth_;  ///< the region growing
 };
 
 }  // namespace

@@ -10,6 +10,7 @@
 #include <fstream>
 #include <istream>
 #include <sstream>
+#include <string_view>
 #include <vector>
 
 #include "planeslam/datasets/atomic_file.hpp"
@@ -35,7 +36,7 @@ Eigen::Matrix<double, 6, 1> ConventionScale() {
 
 class LineParser {
  public:
-  LineParser(const std::string& name, long line, std::vector<std::string> tokens)
+  LineParser(const std::string& name, long line, std::vector<std::string_view> tokens)
       : name_(name), line_(line), tokens_(std::move(tokens)) {}
 
   void ExpectCount(std::size_t count, const std::string& what) const {
@@ -45,22 +46,32 @@ class LineParser {
     }
   }
 
+  // from_chars reads the plain decimal forms of g2o files fast and rounds as strtod does;
+  // anything else (a leading '+', hex, inf, out of range) takes the strtod path.
   std::int64_t Id(std::size_t i) const {
-    const std::string& t = tokens_[i];
+    const std::string_view t = tokens_[i];
+    long long v = 0;
+    const auto fast = std::from_chars(t.data(), t.data() + t.size(), v);
+    if (fast.ec == std::errc() && fast.ptr == t.data() + t.size()) return v;
+    const std::string text(t);
     errno = 0;
     char* end = nullptr;
-    const long long v = std::strtoll(t.c_str(), &end, 10);
-    if (t.empty() || *end != '\0' || errno == ERANGE)
-      Fail("expected an integer id, got '" + t + "'");
+    v = std::strtoll(text.c_str(), &end, 10);
+    if (text.empty() || *end != '\0' || errno == ERANGE)
+      Fail("expected an integer id, got '" + text + "'");
     return static_cast<std::int64_t>(v);
   }
 
   double Number(std::size_t i) const {
-    const std::string& t = tokens_[i];
+    const std::string_view t = tokens_[i];
+    double v = 0.0;
+    const auto fast = std::from_chars(t.data(), t.data() + t.size(), v);
+    if (fast.ec == std::errc() && fast.ptr == t.data() + t.size() && std::isfinite(v)) return v;
+    const std::string text(t);
     char* end = nullptr;
-    const double v = std::strtod(t.c_str(), &end);
-    if (t.empty() || *end != '\0') Fail("expected a number, got '" + t + "'");
-    if (!std::isfinite(v)) Fail("non-finite value '" + t + "'");
+    v = std::strtod(text.c_str(), &end);
+    if (text.empty() || *end != '\0') Fail("expected a number, got '" + text + "'");
+    if (!std::isfinite(v)) Fail("non-finite value '" + text + "'");
     return v;
   }
 
@@ -78,13 +89,13 @@ class LineParser {
 
   [[noreturn]] void Fail(const std::string& reason) const { throw IoError(name_, line_, reason); }
 
-  const std::vector<std::string>& tokens() const { return tokens_; }
+  const std::vector<std::string_view>& tokens() const { return tokens_; }
   long line() const { return line_; }
 
  private:
   const std::string& name_;
   long line_;
-  std::vector<std::string> tokens_;
+  std::vector<std::string_view> tokens_;
 };
 
 struct PendingEdge {
@@ -100,15 +111,14 @@ struct PendingFix {
 void AppendNumber(std::string& out, double v) {
   char buffer[40];
   buffer[0] = ' ';
-  // 17 significant digits: strtod reads back the same double (IEEE 754 round trip). to_chars
-  // with a precision prints exactly what printf's %.17g does, several times faster.
-  const auto result = std::to_chars(buffer + 1, buffer + sizeof(buffer), v,
-                                    std::chars_format::general, 17);
+  // The shortest text strtod reads back as the same double (IEEE 754 round trip).
+  const auto result = std::to_chars(buffer + 1, buffer + sizeof(buffer), v);
   out.append(buffer, result.ptr);
 }
 
 /// Splits a line at the characters isspace() accepts in the C locale (what >> skips).
-void SplitTokens(const std::string& text, std::vector<std::string>* tokens) {
+/// The tokens view `text`, which must outlive them.
+void SplitTokens(const std::string& text, std::vector<std::string_view>* tokens) {
   tokens->clear();
   const auto space = [](char c) {
     return c == ' ' || c == '\t' || c == '\n' || c == '\v' || c == '\f' || c == '\r';
@@ -118,7 +128,7 @@ void SplitTokens(const std::string& text, std::vector<std::string>* tokens) {
     while (i < text.size() && space(text[i])) ++i;
     std::size_t j = i;
     while (j < text.size() && !space(text[j])) ++j;
-    if (j > i) tokens->emplace_back(text, i, j - i);
+    if (j > i) tokens->emplace_back(text.data() + i, j - i);
     i = j;
   }
 }
@@ -143,11 +153,11 @@ PoseGraph ParseG2o(std::istream& in, const std::string& name) {
   long line_number = 0;
   while (std::getline(in, text)) {
     ++line_number;
-    std::vector<std::string> tokens;
+    std::vector<std::string_view> tokens;
     SplitTokens(text, &tokens);
     if (tokens.empty() || tokens[0][0] == '#') continue;
     const LineParser line(name, line_number, std::move(tokens));
-    const std::string& tag = line.tokens()[0];
+    const std::string_view tag = line.tokens()[0];
     if (tag == kVertexTag) {
       line.ExpectCount(kVertexValues, kVertexTag);
       PoseGraphNode node;
@@ -187,7 +197,8 @@ PoseGraph ParseG2o(std::istream& in, const std::string& name) {
         fixes.push_back({line_number, line.Id(i)});
       }
     } else {
-      line.Fail("unknown tag '" + tag + "' (supported: VERTEX_SE3:QUAT, EDGE_SE3:QUAT, FIX)");
+      line.Fail("unknown tag '" + std::string(tag) +
+                "' (supported: VERTEX_SE3:QUAT, EDGE_SE3:QUAT, FIX)");
     }
   }
   if (in.bad()) throw IoError(name, "read error");

@@ -7,7 +7,7 @@
 #include <functional>
 #include <future>
 #include <fstream>
-#include <unordered_map>
+#include <utility>
 
 #include "planeslam/datasets/atomic_file.hpp"
 #include "planeslam/datasets/errors.hpp"
@@ -28,15 +28,43 @@ std::vector<std::string> OccupancyMapConfig::Validate() const {
   return problems;
 }
 
+namespace {
+
+/// A point's voxel key and its index in the input.
+struct KeyedPoint {
+  std::uint64_t key;
+  std::uint32_t index;
+};
+
+/// Stable sort by key: least significant digit first, 16 bits a pass, passes whose digit is the
+/// same for every key skipped (a frame's voxels share the high bits).
+void SortByKey(std::vector<KeyedPoint>& items) {
+  std::vector<KeyedPoint> buffer(items.size());
+  std::vector<std::size_t> start(1 << 16);
+  for (int shift = 0; shift < 64; shift += 16) {
+    std::fill(start.begin(), start.end(), 0);
+    for (const KeyedPoint& k : items) ++start[(k.key >> shift) & 0xffff];
+    if (!items.empty() && start[(items.front().key >> shift) & 0xffff] == items.size()) continue;
+    std::size_t sum = 0;
+    for (std::size_t& s : start) sum += std::exchange(s, sum);
+    for (const KeyedPoint& k : items) buffer[start[(k.key >> shift) & 0xffff]++] = k;
+    items.swap(buffer);
+  }
+}
+
+}  // namespace
+
 std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>& points,
                                              double voxel) {
   PLANESLAM_CHECK(voxel > 0, "voxel must be > 0, got " << voxel);
+  PLANESLAM_CHECK(points.size() <= 0xffffffffu, "too many points: " << points.size());
   // Voxel indices packed in 21 bits per axis (offset 2^20): +-2^20 voxels, e.g. +-52 km at 5 cm;
   // points beyond are dropped (no range image reaches that far).
   constexpr std::int64_t kHalf = std::int64_t{1} << 20;
-  std::unordered_map<std::uint64_t, std::pair<Eigen::Vector3d, int>> cells;
-  cells.reserve(points.size() / 4 + 16);
-  for (const auto& p : points) {
+  std::vector<KeyedPoint> keyed;
+  keyed.reserve(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const Eigen::Vector3f& p = points[i];
     if (!p.allFinite()) continue;
     std::uint64_t key = 0;
     bool inside = true;
@@ -48,20 +76,21 @@ std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>&
       }
       key = (key << 21) | static_cast<std::uint64_t>(static_cast<std::int64_t>(idx) + kHalf);
     }
-    if (!inside) continue;
-    auto& c = cells[key];
-    if (c.second == 0) c.first.setZero();
-    c.first += p.cast<double>();
-    ++c.second;
+    if (inside) keyed.push_back({key, static_cast<std::uint32_t>(i)});
   }
-  std::vector<std::pair<std::uint64_t, Eigen::Vector3f>> sorted;
-  sorted.reserve(cells.size());
-  for (const auto& [key, c] : cells) sorted.emplace_back(key, (c.first / c.second).cast<float>());
-  std::sort(sorted.begin(), sorted.end(),
-            [](const auto& a, const auto& b) { return a.first < b.first; });
+  // Sorted by voxel, each voxel's points in input order: the centroids are summed in that order.
+  SortByKey(keyed);
   std::vector<Eigen::Vector3f> out;
-  out.reserve(sorted.size());
-  for (const auto& kv : sorted) out.push_back(kv.second);
+  for (std::size_t begin = 0; begin < keyed.size();) {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    int count = 0;
+    std::size_t end = begin;
+    for (; end < keyed.size() && keyed[end].key == keyed[begin].key; ++end, ++count) {
+      sum += points[keyed[end].index].cast<double>();
+    }
+    out.push_back((sum / count).cast<float>());
+    begin = end;
+  }
   return out;
 }
 
@@ -72,6 +101,8 @@ struct OccupancyMapBuilder::Impl {
   octomap::OcTree tree;
   std::size_t frames = 0;
   std::size_t points = 0;
+  bool inner_stale = false;  ///< inserted lazily since the inner nodes were last updated
+  void InnerNodesUpToDate();
 };
 
 bool OccupancyMapBuilder::available() { return true; }
@@ -86,11 +117,100 @@ OccupancyMapBuilder::OccupancyMapBuilder(const OccupancyMapConfig& config) : con
 
 namespace {
 
-/// The cells one scan frees and occupies, as octomap::OcTree::insertPointCloud computes them. It
-/// depends only on the scan, the pose and the resolution, so scans can be ray-cast in parallel,
-/// each in its own scratch tree (a tree's ray buffer is not shared), and applied in order.
+/// An OcTreeKey packed into 48 bits (x | y << 16 | z << 32).
+std::uint64_t Pack(const octomap::OcTreeKey& k) {
+  return std::uint64_t{k[0]} | std::uint64_t{k[1]} << 16 | std::uint64_t{k[2]} << 32;
+}
+octomap::OcTreeKey Unpack(std::uint64_t p) {
+  return octomap::OcTreeKey(static_cast<octomap::key_type>(p & 0xffff),
+                            static_cast<octomap::key_type>((p >> 16) & 0xffff),
+                            static_cast<octomap::key_type>((p >> 32) & 0xffff));
+}
+
+/// Sorts the 48-bit values data[0..n) ascending: three stable counting passes over 16-bit digits
+/// (several times faster than std::sort on the hundreds of thousands of cells a LiDAR scan frees),
+/// alternating between data and buffer (n values each). Returns where the result lies (buffer).
+std::uint64_t* RadixSort48(std::uint64_t* data, std::uint64_t* buffer, std::size_t n) {
+  std::vector<std::size_t> start(1 << 16);
+  for (int shift = 0; shift < 48; shift += 16) {
+    std::fill(start.begin(), start.end(), 0);
+    for (std::size_t i = 0; i < n; ++i) ++start[(data[i] >> shift) & 0xffff];
+    std::size_t sum = 0;
+    for (std::size_t& s : start) sum += std::exchange(s, sum);
+    for (std::size_t i = 0; i < n; ++i) buffer[start[(data[i] >> shift) & 0xffff]++] = data[i];
+    std::swap(data, buffer);
+  }
+  return data;
+}
+
+/// Open-addressing set of packed keys. Ray casting a scan inserts millions of keys, most of them
+/// repeats near the sensor; octomap's KeySet (an unordered_set) allocates a node for every new key
+/// and frees them all afterwards, which made it the largest cost of building the map.
+class PackedKeySet {
+ public:
+  PackedKeySet() : slots_(1024, kEmpty), mask_(1023), shift_(54) {}
+
+  void Insert(std::uint64_t key) {
+    if (2 * (size_ + 1) > slots_.size()) Grow();
+    for (std::size_t i = Slot(key);; i = (i + 1) & mask_) {
+      if (slots_[i] == key) return;
+      if (slots_[i] == kEmpty) {
+        slots_[i] = key;
+        ++size_;
+        return;
+      }
+    }
+  }
+  bool Contains(std::uint64_t key) const {
+    for (std::size_t i = Slot(key);; i = (i + 1) & mask_) {
+      if (slots_[i] == key) return true;
+      if (slots_[i] == kEmpty) return false;
+    }
+  }
+  /// The keys in ascending order (neighbouring cells next to each other, so applying them in this
+  /// order walks the octree with its upper levels in cache); empties the set. The keys are
+  /// compacted to the front of the table and sorted with its free second half as the buffer
+  /// (the table is at most half full), so sorting a large scan's cells needs no more memory.
+  std::vector<std::uint64_t> TakeSorted() {
+    std::size_t n = 0;
+    for (std::uint64_t k : slots_) {
+      if (k != kEmpty) slots_[n++] = k;
+    }
+    const std::uint64_t* sorted = RadixSort48(slots_.data(), slots_.data() + n, n);
+    std::vector<std::uint64_t> keys(sorted, sorted + n);
+    *this = PackedKeySet();
+    return keys;
+  }
+
+ private:
+  static constexpr std::uint64_t kEmpty = ~std::uint64_t{0};  // no packed key has the top bits
+  std::size_t Slot(std::uint64_t key) const {
+    return static_cast<std::size_t>((key * 0x9E3779B97F4A7C15ULL) >> shift_);
+  }
+  void Grow() {
+    std::vector<std::uint64_t> old(2 * slots_.size(), kEmpty);
+    old.swap(slots_);
+    mask_ = slots_.size() - 1;
+    --shift_;
+    size_ = 0;
+    for (std::uint64_t k : old) {
+      if (k != kEmpty) Insert(k);
+    }
+  }
+
+  std::vector<std::uint64_t> slots_;
+  std::size_t mask_;
+  int shift_;
+  std::size_t size_ = 0;
+};
+
+/// The cells one scan frees and occupies (packed keys, ascending, disjoint), exactly the sets
+/// octomap::OcTree::computeDiscreteUpdate computes: one ray per end voxel (to its centre), rays
+/// longer than max_range cut there and without an end voxel, end voxels removed from the free
+/// cells. It depends only on the scan, the pose and the resolution, so scans can be ray-cast in
+/// parallel and applied in order.
 struct ScanUpdate {
-  octomap::KeySet free_cells, occupied_cells;
+  std::vector<std::uint64_t> free_cells, occupied_cells;
   std::size_t points = 0;
 };
 
@@ -107,21 +227,41 @@ ScanUpdate ComputeScanUpdate(const OccupancyMapConfig& config,
       if (p.allFinite()) kept.push_back(p);
     }
   }
-  octomap::Pointcloud scan;
-  scan.reserve(kept.size());
   const Eigen::Matrix3f R = T_world_sensor.linear().cast<float>();
   const Eigen::Vector3f t = T_world_sensor.translation().cast<float>();
+  const octomap::point3d origin(t.x(), t.y(), t.z());
+  // A tree only for its key arithmetic and ray casting (no nodes are created in it).
+  const octomap::OcTree keys(config.resolution);
+  // Discretized: one ray per end voxel, cast to the voxel's centre.
+  PackedKeySet ends;
   for (const auto& p : kept) {
     const Eigen::Vector3f w = R * p + t;
-    scan.push_back(w.x(), w.y(), w.z());
+    ends.Insert(Pack(keys.coordToKey(octomap::point3d(w.x(), w.y(), w.z()))));
   }
-  const octomap::point3d origin(t.x(), t.y(), t.z());
-  // Discretized: one ray per end voxel (the downsampled points are already about one per voxel
-  // when downsample_voxel ~ resolution; with downsampling off it removes the duplicates).
-  octomap::OcTree scratch(config.resolution);
+  const double max_range = config.max_range > 0 ? config.max_range : -1.0;
+  PackedKeySet free_cells, occupied_cells;
+  octomap::KeyRay ray;
+  for (std::uint64_t end_key : ends.TakeSorted()) {
+    const octomap::point3d p = keys.keyToCoord(Unpack(end_key));
+    octomap::point3d ray_end = p;
+    const bool in_range = max_range < 0.0 || (p - origin).norm() <= max_range;
+    if (in_range) {
+      octomap::OcTreeKey key;
+      if (keys.coordToKeyChecked(p, key)) occupied_cells.Insert(Pack(key));
+    } else {
+      const octomap::point3d direction = (p - origin).normalized();
+      ray_end = origin + direction * static_cast<float>(max_range);
+    }
+    if (keys.computeRayKeys(origin, ray_end, ray)) {
+      for (const octomap::OcTreeKey& k : ray) free_cells.Insert(Pack(k));
+    }
+  }
   ScanUpdate update;
-  scratch.computeDiscreteUpdate(scan, origin, update.free_cells, update.occupied_cells,
-                                config.max_range > 0 ? config.max_range : -1.0);
+  update.free_cells = free_cells.TakeSorted();
+  update.free_cells.erase(std::remove_if(update.free_cells.begin(), update.free_cells.end(),
+                                         [&](std::uint64_t k) { return occupied_cells.Contains(k); }),
+                          update.free_cells.end());
+  update.occupied_cells = occupied_cells.TakeSorted();
   update.points = kept.size();
   return update;
 }
@@ -136,29 +276,41 @@ void OccupancyMapBuilder::Insert(const std::vector<Eigen::Vector3f>& points_sens
 void OccupancyMapBuilder::InsertAll(const std::vector<const std::vector<Eigen::Vector3f>*>& scans,
                                     const std::vector<Pose>& poses, unsigned threads) {
   PLANESLAM_CHECK(scans.size() == poses.size(), "one pose per scan");
-  // At most `threads` scans are ray-cast ahead of the one being applied (memory stays bounded).
+  // While one scan is applied, the next `threads - 1` are ray-cast: every thread is busy, and at
+  // most `threads` scans' cell sets (tens of MB each for a LiDAR scan) are held at once.
   std::deque<std::future<ScanUpdate>> ahead;
   std::size_t next = 0;
-  const auto launch = [&] {
-    const auto policy = threads > 1 ? std::launch::async : std::launch::deferred;
+  const auto launch = [&](std::launch policy) {
     ahead.push_back(std::async(policy, ComputeScanUpdate, std::cref(config_),
                                std::cref(*scans[next]), std::cref(poses[next])));
     ++next;
   };
   while (next < scans.size() || !ahead.empty()) {
-    while (next < scans.size() && ahead.size() < std::max(1u, threads)) launch();
+    if (ahead.empty()) launch(std::launch::deferred);  // nothing to overlap with: this thread
     const ScanUpdate update = ahead.front().get();
     ahead.pop_front();
-    // Applied as insertPointCloud does: free cells, then occupied ones.
-    for (const auto& key : update.free_cells) impl_->tree.updateNode(key, false, false);
-    for (const auto& key : update.occupied_cells) impl_->tree.updateNode(key, true, false);
+    while (next < scans.size() && ahead.size() + 1 < threads) launch(std::launch::async);
+    // Applied as insertPointCloud does, free cells then occupied ones, but lazily: each cell is
+    // updated at most once per scan, so the order within a scan does not matter, and the inner
+    // nodes (maxima of their children) are brought up to date once (InnerNodesUpToDate) instead of
+    // along the path of every cell. The leaves, and so the pruned tree, are the same.
+    for (std::uint64_t key : update.free_cells) impl_->tree.updateNode(Unpack(key), false, true);
+    for (std::uint64_t key : update.occupied_cells) impl_->tree.updateNode(Unpack(key), true, true);
     ++impl_->frames;
     impl_->points += update.points;
+    impl_->inner_stale = true;
   }
+}
+
+void OccupancyMapBuilder::Impl::InnerNodesUpToDate() {
+  if (!inner_stale) return;
+  tree.updateInnerOccupancy();
+  inner_stale = false;
 }
 
 void OccupancyMapBuilder::Write(const std::string& path) const {
   // Pruning merges children with equal values only: occupancy is unchanged and the file smaller.
+  impl_->InnerNodesUpToDate();
   impl_->tree.prune();
   datasets::AtomicOutputFile out(path, /*binary=*/true);
   // writeBinaryConst stores the maximum-likelihood state of every leaf without converting the

@@ -2,6 +2,7 @@
 #include "planeslam/mapping/pose_graph.hpp"
 
 #include <ceres/ceres.h>
+#include <ceres/product_manifold.h>
 #include <ceres/sphere_manifold.h>
 
 #include <Eigen/Cholesky>
@@ -199,52 +200,48 @@ Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
 ///   position: with u = vec(q_a), w = q_a.w, t = p_b - p_a, Eigen rotates by conj(q_a) as
 ///             f = t - 2w (u x t) + 2 u x (u x t), so df/dt = I - 2w [u]x + 2 [u]x^2,
 ///             df/dw = -2 (u x t), df/du = 2w [t]x + 2 ((u.t) I + u t^T - 2 t u^T).
-class RelativePoseCost final : public ceres::SizedCostFunction<6, 3, 4, 3, 4> {
+///
+/// Each pose is one 7-parameter block (p, then q): the normal equations then have one 6x6 block
+/// per pair of joined poses instead of four smaller ones, which the sparse Cholesky
+/// factorisation and the Jacobian products handle with less overhead.
+class RelativePoseCost final : public ceres::SizedCostFunction<6, 7, 7> {
  public:
   explicit RelativePoseCost(const RelativePoseError& error) : error_(error) {}
 
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override {
-    error_(parameters[0], parameters[1], parameters[2], parameters[3], residuals);
+    const double* x_a = parameters[0];
+    const double* x_b = parameters[1];
+    error_(x_a, x_a + 3, x_b, x_b + 3, residuals);
     if (jacobians == nullptr) return true;
-    using RowMajor63 = Eigen::Matrix<double, 6, 3, Eigen::RowMajor>;
-    using RowMajor64 = Eigen::Matrix<double, 6, 4, Eigen::RowMajor>;
+    using RowMajor67 = Eigen::Matrix<double, 6, 7, Eigen::RowMajor>;
     const Matrix6d& U = error_.sqrt_information();
-    const Eigen::Map<const Eigen::Vector3d> p_a(parameters[0]);
-    const Eigen::Map<const Eigen::Quaterniond> q_a(parameters[1]);
-    const Eigen::Map<const Eigen::Vector3d> p_b(parameters[2]);
-    const Eigen::Map<const Eigen::Quaterniond> q_b(parameters[3]);
+    const Eigen::Map<const Eigen::Vector3d> p_a(x_a);
+    const Eigen::Map<const Eigen::Quaterniond> q_a(x_a + 3);
+    const Eigen::Map<const Eigen::Vector3d> p_b(x_b);
+    const Eigen::Map<const Eigen::Quaterniond> q_b(x_b + 3);
     const Eigen::Vector3d u = q_a.vec();
     const double w = q_a.w();
     const Eigen::Vector3d t = p_b - p_a;
     const Eigen::Matrix3d su = Skew(u);
     const Eigen::Matrix3d dt = Eigen::Matrix3d::Identity() - 2.0 * w * su + 2.0 * su * su;
     if (jacobians[0] != nullptr) {
-      Eigen::Map<RowMajor63> j(jacobians[0]);
-      j = -U.leftCols<3>() * dt;
-    }
-    if (jacobians[2] != nullptr) {
-      Eigen::Map<RowMajor63> j(jacobians[2]);
-      j = U.leftCols<3>() * dt;
-    }
-    if (jacobians[1] != nullptr) {
+      Eigen::Map<RowMajor67> j(jacobians[0]);
+      j.leftCols<3>() = -U.leftCols<3>() * dt;
       Eigen::Matrix<double, 6, 4> e;
       e.topLeftCorner<3, 3>() = 2.0 * w * Skew(t) + 2.0 * (u.dot(t) * Eigen::Matrix3d::Identity() +
                                                            u * t.transpose() - 2.0 * t * u.transpose());
       e.topRightCorner<3, 1>() = -2.0 * u.cross(t);
       const Eigen::Quaterniond q_ab_qb_inv = error_.q_ab() * q_b.conjugate();
       e.bottomRows<3>() = 2.0 * QuaternionLeft(q_ab_qb_inv).topRows<3>();
-      Eigen::Map<RowMajor64> j(jacobians[1]);
-      j = U * e;
+      j.rightCols<4>() = U * e;
     }
-    if (jacobians[3] != nullptr) {
-      Eigen::Matrix<double, 6, 4> e;
-      e.topRows<3>().setZero();
+    if (jacobians[1] != nullptr) {
+      Eigen::Map<RowMajor67> j(jacobians[1]);
+      j.leftCols<3>() = U.leftCols<3>() * dt;
       Eigen::Matrix4d m = QuaternionLeft(error_.q_ab()) * QuaternionRight(q_a);
       m.leftCols<3>() = -m.leftCols<3>();
-      e.bottomRows<3>() = 2.0 * m.topRows<3>();
-      Eigen::Map<RowMajor64> j(jacobians[3]);
-      j = U.rightCols<3>() * e.bottomRows<3>();
+      j.rightCols<4>() = U.rightCols<3>() * (2.0 * m.topRows<3>());
     }
     return true;
   }
@@ -268,10 +265,9 @@ class PlaneObservationError {
   explicit PlaneObservationError(const PlaneLandmarkObservation& obs) : obs_(obs) {}
 
   template <typename T>
-  bool operator()(const T* p_ptr, const T* q_ptr, const T* n_ptr, const T* d_ptr,
-                  T* residual_ptr) const {
-    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> p(p_ptr);
-    const Eigen::Map<const Eigen::Quaternion<T>> q(q_ptr);
+  bool operator()(const T* pose_ptr, const T* n_ptr, const T* d_ptr, T* residual_ptr) const {
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> p(pose_ptr);
+    const Eigen::Map<const Eigen::Quaternion<T>> q(pose_ptr + 3);
     const Eigen::Map<const Eigen::Matrix<T, 3, 1>> n(n_ptr);
     const Eigen::Matrix<T, 3, 1> n_node = q.conjugate() * n;
     const T d_node = d_ptr[0] - n.dot(p);
@@ -283,13 +279,17 @@ class PlaneObservationError {
   }
 
   static ceres::CostFunction* Create(const PlaneLandmarkObservation& obs) {
-    return new ceres::AutoDiffCostFunction<PlaneObservationError, 4, 3, 4, 3, 1>(
+    return new ceres::AutoDiffCostFunction<PlaneObservationError, 4, 7, 3, 1>(
         new PlaneObservationError(obs));
   }
 
  private:
   PlaneLandmarkObservation obs_;
 };
+
+/// A node's pose block: position (Euclidean) and unit quaternion (Eigen's x y z w order).
+using PoseManifold =
+    ceres::ProductManifold<ceres::EuclideanManifold<3>, ceres::EigenQuaternionManifold>;
 
 ceres::LossFunction* MakeLoopClosureLoss(const PoseGraphConfig& config) {
   // Ceres' losses act on s = |r|^2 with scale a: quadratic for s < a^2.
@@ -317,10 +317,10 @@ const char* TerminationName(ceres::TerminationType type) {
   return "UNKNOWN";
 }
 
-/// Parameter blocks of the nodes (p, q) plus the problem with one residual block per edge.
+/// One parameter block per node (p, then q in Eigen's x y z w order) plus the problem with one
+/// residual block per edge.
 struct BuiltProblem {
-  std::vector<Eigen::Vector3d> positions;
-  std::vector<Eigen::Quaterniond> rotations;
+  std::vector<Eigen::Matrix<double, 7, 1>> poses;
   std::unique_ptr<ceres::Problem> problem;
   std::size_t num_fixed = 0;
 };
@@ -333,12 +333,10 @@ BuiltProblem BuildProblem(const PoseGraph& graph, const PoseGraphConfig& config,
                           const std::unordered_set<std::int64_t>* free_nodes = nullptr) {
   BuiltProblem built;
   const auto& nodes = graph.nodes();
-  built.positions.resize(nodes.size());
-  built.rotations.resize(nodes.size());
+  built.poses.resize(nodes.size());
   std::unordered_map<std::int64_t, std::size_t> index;
   for (std::size_t i = 0; i < nodes.size(); ++i) {
-    built.positions[i] = nodes[i].position;
-    built.rotations[i] = nodes[i].rotation.normalized();
+    built.poses[i] << nodes[i].position, nodes[i].rotation.normalized().coeffs();
     index.emplace(nodes[i].id, i);
   }
 
@@ -356,9 +354,8 @@ BuiltProblem BuildProblem(const PoseGraph& graph, const PoseGraphConfig& config,
     const std::size_t b = index.at(edge.to);
     ceres::LossFunction* loss = edge.kind == EdgeKind::kLoopClosure ? loop_loss : nullptr;
     loss_used |= loss != nullptr;
-    problem.AddResidualBlock(RelativePoseCost::Create(edge), loss, built.positions[a].data(),
-                             built.rotations[a].coeffs().data(), built.positions[b].data(),
-                             built.rotations[b].coeffs().data());
+    problem.AddResidualBlock(RelativePoseCost::Create(edge), loss, built.poses[a].data(),
+                             built.poses[b].data());
   }
   if (planes) {
     for (PlaneLandmark& plane : *planes) {
@@ -371,8 +368,7 @@ BuiltProblem BuildProblem(const PoseGraph& graph, const PoseGraphConfig& config,
         if (it == index.end() || !is_free(obs.node)) continue;
         const std::size_t a = it->second;
         problem.AddResidualBlock(PlaneObservationError::Create(obs), loop_loss,
-                                 built.positions[a].data(), built.rotations[a].coeffs().data(),
-                                 plane.normal.data(), &plane.d);
+                                 built.poses[a].data(), plane.normal.data(), &plane.d);
         loss_used |= loop_loss != nullptr;
         ++used;
       }
@@ -387,11 +383,11 @@ BuiltProblem BuildProblem(const PoseGraph& graph, const PoseGraphConfig& config,
   if (!loss_used) delete loop_loss;
 
   for (std::size_t i = 0; i < nodes.size(); ++i) {
-    if (!problem.HasParameterBlock(built.positions[i].data())) {
+    if (!problem.HasParameterBlock(built.poses[i].data())) {
       // An isolated node: nothing constrains it, leave it out of the problem.
       continue;
     }
-    problem.SetManifold(built.rotations[i].coeffs().data(), new ceres::EigenQuaternionManifold);
+    problem.SetManifold(built.poses[i].data(), new PoseManifold);
   }
   // Gauge: the FIX nodes, else the first node (as g2o does).
   std::vector<std::size_t> fixed;
@@ -400,9 +396,8 @@ BuiltProblem BuildProblem(const PoseGraph& graph, const PoseGraphConfig& config,
   }
   if (fixed.empty() && !nodes.empty()) fixed.push_back(0);
   for (std::size_t i : fixed) {
-    if (!problem.HasParameterBlock(built.positions[i].data())) continue;
-    problem.SetParameterBlockConstant(built.positions[i].data());
-    problem.SetParameterBlockConstant(built.rotations[i].coeffs().data());
+    if (!problem.HasParameterBlock(built.poses[i].data())) continue;
+    problem.SetParameterBlockConstant(built.poses[i].data());
   }
   built.num_fixed = fixed.size();
   return built;
@@ -464,8 +459,8 @@ PoseGraphResult OptimizePoseGraphWindow(PoseGraph& graph,
   if (result.usable) {
     auto& nodes = graph.nodes();
     for (std::size_t i = 0; i < nodes.size(); ++i) {
-      nodes[i].position = built.positions[i];
-      nodes[i].rotation = built.rotations[i].normalized();
+      nodes[i].position = built.poses[i].head<3>();
+      nodes[i].rotation = Eigen::Quaterniond(built.poses[i].tail<4>()).normalized();
     }
     if (planes) *planes = std::move(landmarks);
   }
@@ -488,15 +483,14 @@ EdgeResidualEvaluation EvaluateEdgeResidual(const PoseGraphEdge& edge,
   std::unique_ptr<ceres::CostFunction> cost(RelativePoseCost::Create(edge));
   const Eigen::Matrix<double, 7, 1> a = x_a;
   const Eigen::Matrix<double, 7, 1> b = x_b;
-  const double* parameters[4] = {a.data(), a.data() + 3, b.data(), b.data() + 3};
+  const double* parameters[2] = {a.data(), b.data()};
   // Ceres wants row-major Jacobians, one per parameter block.
-  Eigen::Matrix<double, 6, 3, Eigen::RowMajor> j_pa, j_pb;
-  Eigen::Matrix<double, 6, 4, Eigen::RowMajor> j_qa, j_qb;
-  double* jacobians[4] = {j_pa.data(), j_qa.data(), j_pb.data(), j_qb.data()};
+  Eigen::Matrix<double, 6, 7, Eigen::RowMajor> j_a, j_b;
+  double* jacobians[2] = {j_a.data(), j_b.data()};
   EdgeResidualEvaluation out;
   cost->Evaluate(parameters, out.residual.data(), jacobians);
-  out.d_a << j_pa, j_qa;
-  out.d_b << j_pb, j_qb;
+  out.d_a = j_a;
+  out.d_b = j_b;
   return out;
 }
 

@@ -54,7 +54,9 @@ TEST(ConstraintSourceCli, FramesCsvFlagsWhatConstrainedEachFrame) {
     EXPECT_TRUE(allowed.count(f[source])) << line;
     const int weak = std::stoi(f[weak_column]);
     // A frame with an open direction names what filled it; a fully constrained one says planes.
-    if (weak == 0) EXPECT_EQ(f[source], "planes") << line;
+    if (weak == 0) {
+      EXPECT_EQ(f[source], "planes") << line;
+    }
     if (f[source].find("prior") != std::string::npos) ++with_prior;
     ++rows;
   }

@@ -129,6 +129,14 @@ TEST(ThreadDeterminism, TumFolderSameForOneTwoThreads) {
                             10, {"1", "2"});
 }
 
+// The KITTI scans with their profile: LiDAR tracking and the outdoor OctoMap, whose scans are
+// ray-cast on several threads.
+TEST(ThreadDeterminism, KittiScansSameForOneTwoThreads) {
+  PLANESLAM_REQUIRE_DATA();
+  ExpectSameForThreadCounts(
+      "-q " + (DataDir() / "kitti_velodyne").string() + " --set run.max_frames=4", 10, {"1", "2"});
+}
+
 // Randomised delays (fixed seed, 20 draws): whatever order the workers finish in, items come out
 // in index order, each once; a throwing item delivers its exception in its turn.
 TEST(OrderedPipeline, ItemsInOrderWhateverTheDelays) {

@@ -280,7 +280,9 @@ TEST(StreetKittiLayout, EveryLaserRecoveredAcrossSeedsAndPlaces) {
       EXPECT_EQ(stats.placed, scan.size());
       for (std::size_t i = 0; i < cloud.points.size(); ++i) {
         ASSERT_EQ(back.IsValid(i), cloud.IsValid(i)) << "seed " << seed << " scan " << index;
-        if (cloud.IsValid(i)) ASSERT_EQ(back.points[i], cloud.points[i]);
+        if (cloud.IsValid(i)) {
+          ASSERT_EQ(back.points[i], cloud.points[i]);
+        }
       }
     }
   }

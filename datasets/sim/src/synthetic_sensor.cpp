@@ -334,17 +334,54 @@ class PinholeCaster final : public CasterBase {
 
   /// Polygons: with D = (x, y, 1) the plane denominator n.D and the edge terms m_i.D are affine
   /// in x and y, so the row parts are computed once per row (same tests as Intersect()).
+  /// Each row is tested only over the columns its span can cover: multiplied by den (whose sign
+  /// is that of d wherever s = d / den > 0), edge test i, s (m_i.D) >= b_i, becomes the linear
+  /// |d| (m_i.D) - sign(d) b_i den >= 0 in x, and the span is the intersection of these
+  /// half-lines, widened by a relative tolerance far above rounding and by a column on each side.
+  /// The exact test still decides every pixel of the span, so the hits are the same.
   bool FastLoop(const Primitive& p, int index, const PixelBox& box,
                 std::vector<Hit>& hits) const override {
     if (p.kind != Kind::kPolygon || p.edge_n.size() > kMaxEdges) return false;
+    if (p.d == 0.0) return true;  // the plane passes through the eye: s = 0 is never a hit
     const std::size_t m = p.edge_n.size();
+    const double sign = p.d > 0.0 ? 1.0 : -1.0, abs_d = std::abs(p.d);
+    const double x_max = std::max(std::abs(xs_[static_cast<std::size_t>(box.c0)]),
+                                  std::abs(xs_[static_cast<std::size_t>(box.c1)]));
+    const double fx = config_.intrinsics.fx, cx = config_.intrinsics.cx;
     double row_term[kMaxEdges];
     for (int r = box.r0; r <= box.r1; ++r) {
       const double y = ys_[static_cast<std::size_t>(r)];
       const double den_r = p.n.y() * y + p.n.z();
       for (std::size_t e = 0; e < m; ++e) row_term[e] = p.edge_n[e].y() * y + p.edge_n[e].z();
+      // Span [x_lo, x_hi] where every constraint a x + b >= -tol holds; s > 0 is one more.
+      double x_lo = -std::numeric_limits<double>::infinity(), x_hi = -x_lo;
+      bool empty = false;
+      auto constrain = [&](double a, double b, double scale) {
+        const double tol = 1e-9 * scale;
+        if (a > 0.0) {
+          x_lo = std::max(x_lo, (-b - tol) / a);
+        } else if (a < 0.0) {
+          x_hi = std::min(x_hi, (-b - tol) / a);
+        } else if (b < -tol) {
+          empty = true;
+        }
+      };
+      constrain(sign * p.n.x(), sign * den_r, std::abs(p.n.x()) * x_max + std::abs(den_r));
+      for (std::size_t e = 0; e < m; ++e) {
+        const double ex = p.edge_n[e].x(), eb = p.edge_b[e];
+        constrain(abs_d * ex - sign * eb * p.n.x(), abs_d * row_term[e] - sign * eb * den_r,
+                  abs_d * (std::abs(ex) * x_max + std::abs(row_term[e])) +
+                      std::abs(eb) * (std::abs(p.n.x()) * x_max + std::abs(den_r)));
+      }
+      if (empty || !(x_lo <= x_hi)) continue;
+      // Columns c with x = (c - cx) / fx in the span, one more on each side.
+      const double u_lo = x_lo * fx + cx - 1.0, u_hi = x_hi * fx + cx + 1.0;
+      const int c0 = u_lo > box.c0 ? static_cast<int>(std::min<double>(std::floor(u_lo), box.c1 + 1))
+                                   : box.c0;
+      const int c1 = u_hi < box.c1 ? static_cast<int>(std::max<double>(std::ceil(u_hi), box.c0 - 1))
+                                   : box.c1;
       Hit* row_hits = hits.data() + static_cast<std::size_t>(r) * width_;
-      for (int c = box.c0; c <= box.c1; ++c) {
+      for (int c = c0; c <= c1; ++c) {
         const double x = xs_[static_cast<std::size_t>(c)];
         const double den = den_r + p.n.x() * x;
         if (den == 0.0) continue;

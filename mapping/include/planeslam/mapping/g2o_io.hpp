@@ -30,7 +30,7 @@ PoseGraph ParseG2o(std::istream& in, const std::string& name);
 /// Reads a g2o file; throws IoError when it cannot be opened or is malformed.
 PoseGraph ReadG2o(const std::string& path);
 
-/// The graph as g2o text, numbers with 17 significant digits (exact round trip).
+/// The graph as g2o text, each number the shortest text that reads back exactly.
 std::string FormatG2o(const PoseGraph& graph);
 
 /// Writes FormatG2o(graph) to `path` atomically; throws IoError on failure.
