@@ -39,7 +39,8 @@ void WriteClosuresCsv(const std::string& path, const mapping::SlamSystem& slam,
   const bool judged = ground_truth.size() >= 2;
   std::ostringstream out;
   out << "from_frame,to_frame,from_keyframe,to_keyframe,x,y,z,qx,qy,qz,qw,chi2_trajectory,"
-         "chi2_residual,support,status,reason,injected,decided_frame,shared_planes,shared_agreeing"
+         "chi2_residual,support,status,reason,injected,decided_frame,shared_planes,shared_agreeing,"
+         "map_vouched,verified_by"
       << (judged ? ",true,translation_error,rotation_error_deg" : "") << "\n";
   for (const mapping::LoopClosureRecord& r : slam.closures()) {
     const Eigen::Quaterniond q(r.T_from_to.rotation());
@@ -51,7 +52,7 @@ void WriteClosuresCsv(const std::string& path, const mapping::SlamSystem& slam,
     }
     out << "," << r.support << "," << mapping::ClosureStatusName(r.status) << ",\"" << r.reason
         << "\"," << r.injected << "," << r.decided_frame << "," << r.shared_planes << ","
-        << r.shared_agreeing;
+        << r.shared_agreeing << "," << r.map_vouched << "," << r.verified_by;
     if (judged) {
       const ds::ClosureTruth truth = Judge(r, estimate, ground_truth);
       out << "," << (truth.known ? (truth.correct ? "1" : "0") : "") << ","

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <random>
 #include <sstream>
+#include <unordered_set>
 
 #include "planeslam/mapping/slam_system.hpp"
 #include "slam_internal.hpp"
@@ -96,26 +97,42 @@ void SlamSystem::SearchLoopClosures(const Keyframe& current, SlamFrameResult* re
     prior.T_prev_curr = KeyframePose(old.id).inverse() * T_world_current;
     prior.covariance =
         DiagonalCovariance(config_.loop_prior_translation_sigma, config_.loop_prior_rotation_sigma);
-    const registration::RegistrationResult anchored =
+    registration::RegistrationResult anchored =
         registration::AssociatePlanes(old.planes, current.planes, prior, association_config_,
                                       registration_config_)
             .registration;
+    if (anchored.converged && anchored.degenerate) FillClosureFromPoints(old, current, &anchored);
     const int fault = VerificationFault(anchored);
-    if (fault != 0) {
+    // A second well-determined solution without the anchor: the anchor's offset gate loses the
+    // true partners after a drift of decimetres, and where both are determined and differ, the
+    // planes do not single out one relative pose. The map around the old keyframe then decides:
+    // a solution is taken when the new keyframe's planes, placed by it, lie on the map planes
+    // there and the other solution's do not. (The unanchored solution alone is not trusted:
+    // where the anchored one finds nothing, it picks the wrong face about as often as the right
+    // one.)
+    const registration::RegistrationResult unanchored = UnanchoredRegistration(old, current, prior);
+    const bool unanchored_usable = VerificationFault(unanchored) == 0;
+    const registration::RegistrationResult* chosen = fault == 0 ? &anchored : nullptr;
+    bool vouched = false;
+    if (unanchored_usable && (fault != 0 || Differ(anchored, unanchored))) {
+      const bool u = CheckAgainstMap(old, current, unanchored.T_prev_curr, unanchored.covariance)
+                         .Vouches(config_.loop_min_matches);
+      const bool a =
+          fault == 0 && CheckAgainstMap(old, current, anchored.T_prev_curr, anchored.covariance)
+                            .Vouches(config_.loop_min_matches);
+      chosen = u && !a ? &unanchored : nullptr;
+      vouched = chosen != nullptr;
+      if (!chosen && fault == 0) {
+        ++stats_.loop_refused_ambiguous;
+        continue;
+      }
+    }
+    if (!chosen) {
       ++(fault == 1 ? stats_.loop_refused_degenerate
                     : fault == 2 ? stats_.loop_refused_matches : stats_.loop_refused_residual);
       continue;
     }
-    // A second well-determined solution without the anchor that differs from the anchored one:
-    // the planes do not single out one relative pose. (The unanchored solution alone is not
-    // trusted either: where the anchored one finds nothing, it picks the wrong face about as
-    // often as the right one.)
-    const registration::RegistrationResult unanchored = UnanchoredRegistration(old, current, prior);
-    if (VerificationFault(unanchored) == 0 && Differ(anchored, unanchored)) {
-      ++stats_.loop_refused_ambiguous;
-      continue;
-    }
-    const registration::RegistrationResult& reg = anchored;
+    const registration::RegistrationResult& reg = *chosen;
     LoopClosureRecord record;
     record.from_keyframe = old.id;
     record.to_keyframe = current.id;
@@ -123,6 +140,8 @@ void SlamSystem::SearchLoopClosures(const Keyframe& current, SlamFrameResult* re
     record.to_frame = current.frame;
     record.T_from_to = reg.T_prev_curr;
     record.covariance = reg.covariance;
+    record.map_vouched = vouched;
+    record.verified_by = registration::ConstraintSource(reg);
     ProposeClosure(std::move(record), result);
   }
 }
@@ -147,10 +166,34 @@ registration::RegistrationResult SlamSystem::UnanchoredRegistration(
       .registration;
 }
 
+bool SlamSystem::FillClosureFromPoints(const Keyframe& old, const Keyframe& current,
+                                       registration::RegistrationResult* reg) const {
+  // A street or a corridor: ground and facades leave the driving direction open. The points
+  // outside the planes (poles, edges, door recesses, clutter) of the old keyframe and its
+  // neighbours, placed by the current estimate relative to the old keyframe, form a map the new
+  // keyframe's structure is aligned to along the open directions, the planes' solution as the
+  // prior (registration/local_map.hpp). The neighbours densify the map; their placement relies
+  // on a few keyframes of odometry only.
+  if (!local_map_ || current.structure.empty() || old.structure.empty()) return false;
+  registration::LocalVoxelMap map(local_map_->voxel_size(), kClosureMapPointsPerVoxel);
+  const Pose T_old_world = KeyframePose(old.id).inverse();
+  const std::int64_t last = current.id - config_.loop_min_keyframe_gap;
+  for (std::int64_t id = std::max<std::int64_t>(0, old.id - kClosureMapNeighbours);
+       id <= std::min(last, old.id + kClosureMapNeighbours); ++id) {
+    map.Insert(keyframes_[static_cast<std::size_t>(id)].structure, T_old_world * KeyframePose(id),
+               0.0);
+  }
+  registration::FillDegenerateFromLocalMap(map, Pose::Identity(), current.structure, {}, reg);
+  return reg->used_icp && reg->prior_directions == 0;
+}
+
 int SlamSystem::VerificationFault(const registration::RegistrationResult& reg) const {
-  // Only a closure the planes fully determine may correct the trajectory: a degenerate one
-  // would carry the (drifted) prior into the graph as if it were a measurement.
-  if (!reg.converged || reg.degenerate) return 1;
+  // Only a closure fully determined, by the planes or by the points where the planes leave
+  // directions open, may correct the trajectory: a degenerate one would carry the (drifted)
+  // prior into the graph as if it were a measurement.
+  if (!reg.converged || (reg.degenerate && !(reg.used_icp && reg.prior_directions == 0))) {
+    return 1;
+  }
   if (static_cast<int>(reg.inliers.size()) < config_.loop_min_matches) return 2;
   if (!(reg.residual_rms < config_.loop_max_residual)) return 3;
   return 0;
@@ -192,9 +235,67 @@ void SlamSystem::InjectFalseClosures(const Keyframe& current, SlamFrameResult* r
     record.covariance =
         verified != closures_.rend() ? verified->covariance : DiagonalCovariance(0.01, 0.005);
     record.injected = true;
+    record.verified_by = "injected";
     ++stats_.closures_injected;
     ProposeClosure(std::move(record), result);
   }
+}
+
+SlamSystem::MapCheck SlamSystem::CheckAgainstMap(const Keyframe& old, const Keyframe& current,
+                                                 const Pose& T_old_current,
+                                                 const Matrix6d& covariance) const {
+  // The map planes the old keyframe and its neighbours joined: the map of that place, seen
+  // from keyframes whose poses agree with one another.
+  std::unordered_set<int> near;
+  const std::int64_t last = current.id - config_.loop_min_keyframe_gap;
+  for (std::int64_t id = std::max<std::int64_t>(0, old.id - kMapCheckNeighbours);
+       id <= std::min(last, old.id + kMapCheckNeighbours); ++id) {
+    for (int map_id : keyframes_[static_cast<std::size_t>(id)].map_planes) {
+      const int resolved = map_id > 0 ? map_.ResolveId(map_id) : -1;
+      if (resolved > 0) near.insert(resolved);
+    }
+  }
+  const Pose T_world_current = KeyframePose(old.id) * T_old_current;
+  const Eigen::Matrix3d translation_cov = KeyframePose(old.id).linear() *
+                                          covariance.topLeftCorner<3, 3>() *
+                                          KeyframePose(old.id).linear().transpose();
+  const double rotation_var = covariance.bottomRightCorner<3, 3>().trace() / 3.0;
+  const double cos_gate = std::cos(map_.config().max_normal_angle_deg * kDegToRad);
+  MapCheck check;
+  for (const detection::Plane& plane : current.planes) {
+    if (plane.point_count < map_.config().min_observation_points) continue;
+    const Eigen::Vector3d n = T_world_current.linear() * plane.normal;
+    const Eigen::Vector3d c = T_world_current * plane.centroid;
+    bool covered = false, agrees = false;
+    for (int id : near) {
+      const MapPlane* map_plane = map_.Find(id);
+      if (!map_plane || map_plane->normal.dot(n) < cos_gate) continue;
+      // Within the map plane's extent: the centroid's in-plane offset from the map plane's
+      // centre inside twice the spread of its points (a uniform rectangle's half side is 1.7).
+      const Eigen::Vector3d u = c - map_plane->centroid;
+      const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - n * n.transpose();
+      const double count = static_cast<double>(std::max<std::int64_t>(1, map_plane->point_count()));
+      const Eigen::Matrix3d spread =
+          P * (map_plane->stats_world.scatter / count) * P + n * n.transpose();
+      if (!((P * u).dot(spread.ldlt().solve(P * u)) <= 4.0)) continue;
+      covered = true;
+      const double angle = std::acos(std::clamp(map_plane->normal.dot(n), -1.0, 1.0));
+      const double offset = map_plane->normal.dot(c) - map_plane->d;
+      const double angle_var = config_.landmark_normal_sigma * config_.landmark_normal_sigma +
+                               0.5 * plane.covariance.topLeftCorner<3, 3>().trace() + rotation_var;
+      const double offset_var = config_.landmark_offset_sigma * config_.landmark_offset_sigma +
+                                plane.covariance(3, 3) + n.dot(translation_cov * n) +
+                                rotation_var * (c - T_world_current.translation()).squaredNorm();
+      if (angle * angle / angle_var + offset * offset / offset_var <=
+          association_config_.inlier_chi2) {
+        agrees = true;
+        break;
+      }
+    }
+    check.covered += covered ? 1 : 0;
+    check.contradicted += covered && !agrees ? 1 : 0;
+  }
+  return check;
 }
 
 void SlamSystem::CountSharedPlanes(LoopClosureRecord* record) const {
@@ -249,7 +350,7 @@ void SlamSystem::ProposeClosure(LoopClosureRecord record, SlamFrameResult* resul
   // Keyframes that share no map plane are tied only by chains of odometry, which stay loose
   // where the planes left directions open: neither the trajectory test nor the pairwise one then
   // has the power to reject a closure decimetres off, so the map must vouch for it.
-  const bool unshared = record.shared_planes == 0;
+  const bool unshared = record.shared_planes == 0 && !record.map_vouched;
   if (unshared || 2 * record.shared_agreeing < record.shared_planes) {
     record.status = ClosureStatus::kRejected;
     record.reason = unshared ? std::string("the keyframes share no map plane")

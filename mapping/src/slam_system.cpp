@@ -56,11 +56,16 @@ SlamSystem::SlamSystem(const SlamConfig& config, const registration::Association
 
 void SlamSystem::AddKeyframe(std::size_t frame, const Pose& T_world_sensor,
                              const detection::Segmentation& segmentation,
-                             const datasets::OrganizedCloud& cloud) {
+                             const datasets::OrganizedCloud& cloud,
+                             const std::vector<registration::ShapedPoint>& structure) {
   Keyframe keyframe;
   keyframe.id = static_cast<std::int64_t>(keyframes_.size());
   keyframe.frame = frame;
   keyframe.planes = segmentation.planes;
+  if (local_map_ && config_.loop_closure) {
+    keyframe.structure =
+        registration::ThinShapedPoints(structure, kClosureThinning * local_map_->voxel_size());
+  }
   // The first keyframe anchors the world frame (the optimiser holds it fixed).
   graph_.AddNode(keyframe.id, T_world_sensor, /*fixed=*/keyframe.id == 0);
   keyframes_.push_back(std::move(keyframe));
@@ -69,7 +74,8 @@ void SlamSystem::AddKeyframe(std::size_t frame, const Pose& T_world_sensor,
   if (config_.point_to_plane_fill) keyframe_cloud_ = cloud;
   ++stats_.keyframes;
   const auto start = std::chrono::steady_clock::now();
-  map_.AddFrame(keyframes_.back().id, T_world_sensor, segmentation, cloud);
+  keyframes_.back().map_planes =
+      map_.AddFrame(keyframes_.back().id, T_world_sensor, segmentation, cloud).map_ids;
   stats_.time_map_ms += ElapsedMs(start);
 }
 
@@ -146,7 +152,7 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
       local_map_->Insert(structure, T_world_first_, registration::ScanReach(cloud));
       first_cloud_ = cloud;
     }
-    AddKeyframe(result.index, T_world_first_, segmentation, cloud);
+    AddKeyframe(result.index, T_world_first_, segmentation, cloud, structure);
     frames_.push_back({timestamp, 0, Pose::Identity()});
     result.T_world_sensor = T_world_first_;
     result.keyframe = true;
@@ -248,7 +254,7 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
 
   // New keyframe: node, odometry edge weighted by the registration's uncertainty, map planes.
   const std::int64_t previous_id = keyframe.id;
-  AddKeyframe(result.index, result.T_world_sensor, segmentation, cloud);
+  AddKeyframe(result.index, result.T_world_sensor, segmentation, cloud, structure);
   const Keyframe& current = keyframes_.back();
   graph_.AddEdge(previous_id, current.id, T_keyframe_curr, InformationFromCovariance(covariance),
                  EdgeKind::kOdometry);

@@ -50,9 +50,17 @@ TEST(LongRunCli, InjectedFalseClosuresAreNotKept) {
     EXPECT_EQ(closures["ground_truth"]["false_accepted"].get<int>(), 0);
     EXPECT_GT(closures["accepted"].get<int>(), 20);  // the room's true closures still close it
     EXPECT_LT(summary["metrics"]["ate"]["rmse"].get<double>(), 0.0107);
-    // One closures.csv row per hypothesis, each with a status and a reason.
-    EXPECT_EQ(CountLines(Slurp(dir / "out" / "closures.csv")),
-              closures["hypotheses"].get<std::size_t>() + 1);
+    // One closures.csv row per hypothesis, each with a status and a reason, and what verified
+    // it: every injected closure says so.
+    const std::string csv = Slurp(dir / "out" / "closures.csv");
+    EXPECT_EQ(CountLines(csv), closures["hypotheses"].get<std::size_t>() + 1);
+    EXPECT_NE(csv.find(",map_vouched,verified_by"), std::string::npos);
+    std::size_t injected_rows = 0;
+    for (std::size_t at = csv.find(",injected"); at != std::string::npos;
+         at = csv.find(",injected", at + 1)) {
+      ++injected_rows;
+    }
+    EXPECT_EQ(injected_rows, closures["injected"].get<std::size_t>() + 1);  // + the header's
   }
 }
 

@@ -187,6 +187,14 @@ struct LoopClosureRecord {
   /// maps onto each other (a closure with none, or most of them contradicting it, is rejected).
   int shared_planes = 0;
   int shared_agreeing = 0;
+  /// The map around the old keyframe vouches for the closure (SlamSystem::CheckAgainstMap): the
+  /// new keyframe's planes, placed by it, lie on the map planes there. Such a closure may
+  /// reconnect keyframes whose planes joined different map planes (a stretch of drift made
+  /// copies).
+  bool map_vouched = false;
+  /// What determined the measured relative pose: "planes", "planes+points" (the points of the
+  /// two places along the directions the planes leave open), "injected".
+  std::string verified_by;
   ClosureStatus status = ClosureStatus::kPending;
   std::string reason;          ///< why accepted, rejected or retracted
   bool injected = false;       ///< a test-hook false closure
@@ -264,6 +272,21 @@ class SlamSystem {
     std::int64_t id = 0;
     std::size_t frame = 0;
     std::vector<detection::Plane> planes;
+    /// Range images: the structure outside the planes (sensor frame, thinned to the alignment's
+    /// spacing), for the point alignment of loop closures along the directions the planes leave
+    /// open.
+    std::vector<registration::ShapedPoint> structure;
+    std::vector<int> map_planes;  ///< map plane ids its planes joined (ids may since be merged)
+  };
+  /// A loop registration checked against the map around the old keyframe: the new keyframe's
+  /// planes, placed by the closure, that lie within a map plane's extent there, and of those the
+  /// ones the map plane's offset and normal contradict.
+  struct MapCheck {
+    int covered = 0;
+    int contradicted = 0;
+    bool Vouches(int min_matches) const {
+      return covered - contradicted >= min_matches && 4 * contradicted <= covered;
+    }
   };
   struct FrameRecord {
     double timestamp = 0.0;
@@ -273,19 +296,36 @@ class SlamSystem {
 
   /// Nodes a path search of the consistency tests settles at most.
   static constexpr std::size_t kPathSearchNodes = 400;
+  /// A keyframe's structure is kept thinned to this many local-map voxels [-].
+  static constexpr double kClosureThinning = 1.0;
+  /// The old keyframe of a loop candidate and this many neighbours on each side form the map
+  /// its new keyframe's structure is aligned to [keyframes].
+  static constexpr std::int64_t kClosureMapNeighbours = 2;
+  static constexpr int kClosureMapPointsPerVoxel = 20;  ///< as the tracking's local map
+  /// The map planes seen from the old keyframe of a loop candidate and this many keyframes on
+  /// each side are the map a closure is checked against [keyframes].
+  static constexpr std::int64_t kMapCheckNeighbours = 5;
 
   Pose KeyframePose(std::int64_t id) const { return graph_.node(id).T_world_node(); }
   SlamFrameResult TrackFrame(double timestamp, const datasets::OrganizedCloud& cloud,
                              const detection::Segmentation& segmentation);
   void AddKeyframe(std::size_t frame, const Pose& T_world_sensor,
                    const detection::Segmentation& segmentation,
-                   const datasets::OrganizedCloud& cloud);
+                   const datasets::OrganizedCloud& cloud,
+                   const std::vector<registration::ShapedPoint>& structure);
   /// Verifies the loop candidates of the new keyframe; the verified ones become hypotheses.
   void SearchLoopClosures(const Keyframe& current, SlamFrameResult* result);
   /// The loop candidate's planes associated without the estimate's anchor (offsets gated by the
   /// search radius only, no preference for the prior).
   registration::RegistrationResult UnanchoredRegistration(
       const Keyframe& old, const Keyframe& current, const registration::MotionPrior& prior) const;
+  /// Fills the directions a loop registration's planes leave open by aligning the current
+  /// keyframe's structure to that of the old keyframe and its neighbours. Returns whether the
+  /// points determined all of them.
+  bool FillClosureFromPoints(const Keyframe& old, const Keyframe& current,
+                             registration::RegistrationResult* reg) const;
+  MapCheck CheckAgainstMap(const Keyframe& old, const Keyframe& current, const Pose& T_old_current,
+                           const Matrix6d& covariance) const;
   /// Why a loop registration cannot be a closure: 0 usable, 1 not converged or degenerate, 2 too
   /// few matches, 3 residual too large.
   int VerificationFault(const registration::RegistrationResult& reg) const;
