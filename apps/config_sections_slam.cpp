@@ -2,6 +2,8 @@
 // `planeslam run` feeds it and writes).
 #include "config_sections_slam.hpp"
 
+#include "detector_factory.hpp"
+
 namespace planeslam::app {
 namespace {
 
@@ -37,6 +39,13 @@ void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
           "rate (constant angular acceleration) instead of its mean");
   v.Field("point_to_plane_fill", c.point_to_plane_fill,
           "fill directions the planes leave open by point-to-plane alignment of the clouds");
+  v.Field("reacquire_translation_sigma", c.reacquire_translation_sigma,
+          "[m] once the drift along directions the planes left open exceeds this (1-sigma), new "
+          "keyframes are associated with the map under it and pulled back onto the map; 0 = off",
+          0.0, 1e3);
+  v.Field("depth_map_fill", c.depth_map_fill,
+          "depth images: fill directions the planes leave open by aligning the pixels outside "
+          "the planes to a fused depth map of recent frames");
   v.Field("plane_landmarks", c.plane_landmarks,
           "optimise the map planes seen from two or more keyframes with the poses");
   v.Field("landmark_normal_sigma", c.landmark_normal_sigma,
@@ -119,8 +128,15 @@ PLANESLAM_REGISTER_CONFIG_SECTION(RunConfig, "run", "planeslam run: inputs and o
 }  // namespace
 
 std::unique_ptr<mapping::SlamSystem> MakeSlamSystem(const Config& config) {
+  mapping::SlamConfig slam = config.Get<mapping::SlamConfig>("slam");
+  // The depth map weights its points by the sensor's noise model, the detector's.
+  const detection::DetectionParams& noise = config.Get<DetectionSection>("detection").params;
+  if (noise.sigma0 + noise.sigma_z2 > 0) {
+    slam.depth_map.sigma0 = noise.sigma0;
+    slam.depth_map.sigma_z2 = noise.sigma_z2;
+  }
   return std::make_unique<mapping::SlamSystem>(
-      config.Get<mapping::SlamConfig>("slam"),
+      slam,
       config.Get<registration::AssociationConfig>("association"),
       config.Get<registration::RegistrationConfig>("registration"),
       config.Get<registration::PointToPlaneConfig>("point_to_plane"),

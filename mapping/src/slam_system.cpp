@@ -35,6 +35,10 @@ std::vector<std::string> SlamConfig::Validate() const {
   if (loop_window_keyframes < 0) problems.push_back("loop_window_keyframes must be >= 0");
   if (local_window_keyframes < 0) problems.push_back("local_window_keyframes must be >= 0");
   if (inject_false_closures < 0) problems.push_back("inject_false_closures must be >= 0");
+  if (!(reacquire_translation_sigma >= 0)) {
+    problems.push_back("reacquire_translation_sigma must be >= 0");
+  }
+  for (const auto& p : depth_map.Validate()) problems.push_back("depth_map: " + p);
   return problems;
 }
 
@@ -83,6 +87,7 @@ SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::Organ
                                          const detection::Segmentation& segmentation) {
   const auto start = std::chrono::steady_clock::now();
   SlamFrameResult result = TrackFrame(timestamp, cloud, segmentation);
+  UpdateDepthMap(cloud, segmentation.labels, result.T_world_sensor);
   const double ms = ElapsedMs(start);
   if (stats_.frames <= SlamStats::kTimedFrames) stats_.time_first_frames_ms += ms;
   recent_frame_ms_.push_back(ms);
@@ -126,6 +131,52 @@ bool AlignToLocalMap(const registration::LocalVoxelMap& map, const Pose& T_world
 }
 
 }  // namespace
+
+void SlamSystem::UpdateDepthMap(const datasets::OrganizedCloud& cloud,
+                                const std::vector<std::int32_t>& labels,
+                                const Pose& T_world_sensor) {
+  if (!config_.depth_map_fill || !intrinsics_) return;
+  if (!depth_map_) {
+    depth_map_ = std::make_unique<registration::DepthLocalMap>(*intrinsics_, config_.depth_map);
+  }
+  depth_map_->Insert(cloud, &labels, T_world_sensor);
+}
+
+bool SlamSystem::FillFromDepthImage(std::int64_t keyframe_id, const datasets::OrganizedCloud& cloud,
+                                    const std::vector<std::int32_t>& labels,
+                                    registration::RegistrationResult* reg) const {
+  if (!intrinsics_ || !reg->converged || !reg->degenerate) return false;
+  if (depth_map_ && registration::FillDegenerateFromDepthMap(*depth_map_, KeyframePose(keyframe_id),
+                                                             cloud, &labels, reg)) {
+    return true;
+  }
+  return config_.point_to_plane_fill &&
+         registration::FillDegenerateWithPointToPlane(keyframe_cloud_, *intrinsics_, cloud,
+                                                      point_to_plane_config_, reg);
+}
+
+void SlamSystem::AccumulateDrift(bool use_registration,
+                                 const registration::RegistrationResult& reg,
+                                 const Eigen::Matrix3d& R_world_keyframe) {
+  // One frame's change of velocity (the prior's sigmas) along the directions left to the prior:
+  // all of them without a registration, else the planes' open ones when no points filled them
+  // all. Rotated from the keyframe's tangent into world axes.
+  const Matrix6d step = DiagonalCovariance(config_.prior_translation_sigma,
+                                           config_.prior_rotation_sigma);
+  Matrix6d open = Matrix6d::Zero();
+  if (!use_registration) {
+    open = step;
+  } else if (reg.used_prior || (reg.degenerate && !reg.used_icp)) {
+    Matrix6d P = Matrix6d::Zero();
+    for (const registration::Vector6d& d : reg.degenerate_directions) P += d * d.transpose();
+    open = P * step * P;
+  } else {
+    return;
+  }
+  Matrix6d R = Matrix6d::Zero();
+  R.topLeftCorner<3, 3>() = R.bottomRightCorner<3, 3>() = R_world_keyframe;
+  drift_covariance_ += R * open * R.transpose();
+}
 
 SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::OrganizedCloud& cloud,
                                        const detection::Segmentation& segmentation) {
@@ -178,10 +229,7 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
   const registration::AssociationResult association = registration::AssociatePlanes(
       keyframe.planes, segmentation.planes, prior, association_config_, registration_config_);
   registration::RegistrationResult reg = association.registration;
-  if (config_.point_to_plane_fill && reg.converged && reg.degenerate && intrinsics_) {
-    result.used_point_to_plane = registration::FillDegenerateWithPointToPlane(
-        keyframe_cloud_, *intrinsics_, cloud, point_to_plane_config_, &reg);
-  }
+  result.used_point_to_plane = FillFromDepthImage(keyframe.id, cloud, segmentation.labels, &reg);
   if (reg.converged && local_map_ && !structure.empty()) {
     result.used_point_to_plane =
         AlignToLocalMap(*local_map_, KeyframePose(keyframe.id), structure, &reg);
@@ -212,8 +260,9 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
   }
   // The registration falls back to the prior itself (whole or per degenerate direction).
   const bool use_registration = reg.converged && !result.refused;
-  const Pose T_keyframe_curr = use_registration ? reg.T_prev_curr : prior.T_prev_curr;
-  const Matrix6d covariance = use_registration ? reg.covariance : prior.covariance;
+  Pose T_keyframe_curr = use_registration ? reg.T_prev_curr : prior.T_prev_curr;
+  Matrix6d covariance = use_registration ? reg.covariance : prior.covariance;
+  AccumulateDrift(use_registration, reg, KeyframePose(keyframe.id).linear());
   stats_.time_tracking_ms += ElapsedMs(track_start);
   if (!use_registration) ++stats_.untracked_frames;
   result.constrained_by = use_registration ? registration::ConstraintSource(reg) : "prior";
@@ -252,6 +301,7 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
     return result;
   }
 
+  Reacquire(segmentation, keyframe.id, &result.T_world_sensor, &T_keyframe_curr, &covariance);
   // New keyframe: node, odometry edge weighted by the registration's uncertainty, map planes.
   const std::int64_t previous_id = keyframe.id;
   AddKeyframe(result.index, result.T_world_sensor, segmentation, cloud, structure);
@@ -330,6 +380,9 @@ PoseGraphResult SlamSystem::Optimize(std::int64_t first_free) {
        first_free >= 0 && id < static_cast<std::int64_t>(keyframes_.size()); ++id) {
     free_nodes.insert(id);
   }
+  // The depth map moves with the newest keyframe, near which it was built.
+  const Pose T_world_newest_before =
+      keyframes_.empty() ? Pose::Identity() : KeyframePose(keyframes_.back().id);
   const PoseGraphResult result = OptimizePoseGraphWindow(
       graph_, first_free >= 0 ? &free_nodes : nullptr, pose_graph_config_, &landmarks);
   if (first_free >= 0) {
@@ -343,6 +396,10 @@ PoseGraphResult SlamSystem::Optimize(std::int64_t first_free) {
     stats_.map_splits += static_cast<std::size_t>(map_.SplitContradicted());
   }
   if (local_map_) local_map_->Clear();  // its points sit at the poses before the optimisation
+  if (depth_map_ && !keyframes_.empty()) {
+    depth_map_->SetReferencePose(KeyframePose(keyframes_.back().id) *
+                                 T_world_newest_before.inverse() * depth_map_->T_world_ref());
+  }
   ++stats_.optimizations;
   return result;
 }

@@ -11,6 +11,7 @@ std::vector<std::string> PlaneOdometryConfig::Validate() const {
   for (const auto& s : registration.Validate()) p.push_back("registration: " + s);
   for (const auto& s : point_to_plane.Validate()) p.push_back("point_to_plane: " + s);
   for (const auto& s : local_map.Validate()) p.push_back("local_map: " + s);
+  for (const auto& s : depth_map.Validate()) p.push_back("depth_map: " + s);
   if (!(prior_translation_sigma > 0)) p.push_back("prior_translation_sigma must be > 0");
   if (!(prior_rotation_sigma > 0)) p.push_back("prior_rotation_sigma must be > 0");
   if (!(max_prior_gap > 0)) p.push_back("max_prior_gap must be > 0");
@@ -36,6 +37,7 @@ void PlaneOdometry::Reset(const Pose& T_world_first) {
   prev_planes_.clear();
   prev_cloud_ = {};
   map_.reset();
+  depth_map_.reset();
   velocity_.Clear();
   last_dt_ = 0.0;
   frames_ = 0;
@@ -86,8 +88,13 @@ OdometryStep PlaneOdometry::Process(double timestamp, const std::vector<detectio
 }
 
 void PlaneOdometry::FillOpenDirections(const datasets::OrganizedCloud& cloud,
+                                       const std::vector<std::int32_t>* labels,
                                        const std::vector<ShapedPoint>& structure,
                                        RegistrationResult* reg) {
+  if (depth_map_ != nullptr &&
+      FillDegenerateFromDepthMap(*depth_map_, T_world_sensor_, cloud, labels, reg)) {
+    return;
+  }
   // A pinhole pair: projective association with the previous frame's dense image pairs every
   // pixel, where the thinned local map keeps a few points per voxel (on the synthetic corridor's
   // thin pipes the map's fills are the less accurate ones).
@@ -129,6 +136,16 @@ OdometryStep PlaneOdometry::Step(double timestamp, const std::vector<detection::
       map_ = std::make_unique<LocalVoxelMap>(voxel, config_.local_map.max_points_per_voxel);
     }
     if (map_ != nullptr) structure = ScanStructure(*cloud, labels, map_->voxel_size());
+    if (depth_map_ == nullptr && cloud->model == datasets::SensorModel::kPinhole) {
+      if (!intrinsics_ && !intrinsics_estimated_) {
+        intrinsics_ = EstimatePinholeIntrinsics(*cloud);
+        intrinsics_estimated_ = true;  // one attempt: the grid does not change
+      }
+      if (intrinsics_ && intrinsics_->width == cloud->width &&
+          intrinsics_->height == cloud->height) {
+        depth_map_ = std::make_unique<DepthLocalMap>(*intrinsics_, config_.depth_map);
+      }
+    }
   }
   // The alignment's queries, thinned further (KISS-ICP aligns a sparser copy than it maps).
   const std::vector<ShapedPoint> source =
@@ -167,7 +184,7 @@ OdometryStep PlaneOdometry::Step(double timestamp, const std::vector<detection::
     RegistrationResult reg = std::move(assoc.registration);
     if (reg.degenerate && config_.use_point_to_plane && cloud != nullptr) {
       const auto t1 = Clock::now();
-      FillOpenDirections(*cloud, source, &reg);
+      FillOpenDirections(*cloud, labels, source, &reg);
       points_ms += std::chrono::duration<double, std::milli>(Clock::now() - t1).count();
     }
     // Range images refine all six directions on the map; depth images keep the planes' estimate
@@ -194,6 +211,11 @@ OdometryStep PlaneOdometry::Step(double timestamp, const std::vector<detection::
     const auto t2 = Clock::now();
     map_->Insert(structure, T_world_sensor_, reach);
     points_ms += std::chrono::duration<double, std::milli>(Clock::now() - t2).count();
+  }
+  if (depth_map_ != nullptr && cloud != nullptr) {
+    const auto t3 = Clock::now();
+    depth_map_->Insert(*cloud, labels, T_world_sensor_);
+    points_ms += std::chrono::duration<double, std::milli>(Clock::now() - t3).count();
   }
   step.point_to_plane_ms = points_ms;
   trajectory_.Add(timestamp, T_world_sensor_);

@@ -229,17 +229,15 @@ PointToPlaneResult AlignPointToPlane(const datasets::OrganizedCloud& prev,
   return res;
 }
 
-bool FillDegenerateWithPointToPlane(const datasets::OrganizedCloud& prev,
-                                    const datasets::PinholeIntrinsics& K,
-                                    const datasets::OrganizedCloud& curr,
-                                    const PointToPlaneConfig& config, RegistrationResult* result) {
+bool FillDegenerateDirections(const DirectionAligner& align, const FillLimits& limits,
+                              RegistrationResult* result) {
   const int k = static_cast<int>(result->degenerate_directions.size());
   if (k == 0) return false;
   Eigen::MatrixXd D(6, k);
   for (int i = 0; i < k; ++i) D.col(i) = result->degenerate_directions[i];
 
-  // Decides, per direction, whether the clouds pin it down: enough facing pairs, and a marginal
-  // sigma from the point pairs alone below the configured limit.
+  // Decides, per direction, whether the points pin it down: enough facing pairs, and a marginal
+  // sigma from the point pairs alone below the limit.
   auto determined = [&](const PointToPlaneResult& icp, const Eigen::MatrixXd& dirs) {
     std::vector<int> keep;
     const int m = static_cast<int>(dirs.cols());
@@ -248,8 +246,8 @@ bool FillDegenerateWithPointToPlane(const datasets::OrganizedCloud& prev,
     const Eigen::MatrixXd cov = info.ldlt().solve(Eigen::MatrixXd::Identity(m, m));
     for (int i = 0; i < m; ++i) {
       const double max_sigma =
-          IsTranslation(dirs.col(i)) ? config.max_translation_sigma : config.max_rotation_sigma;
-      if (icp.support[i] >= config.min_support && std::isfinite(cov(i, i)) &&
+          IsTranslation(dirs.col(i)) ? limits.max_translation_sigma : limits.max_rotation_sigma;
+      if (icp.support[i] >= limits.min_support && std::isfinite(cov(i, i)) &&
           std::sqrt(std::max(cov(i, i), 0.0)) < max_sigma) {
         keep.push_back(i);
       }
@@ -258,8 +256,7 @@ bool FillDegenerateWithPointToPlane(const datasets::OrganizedCloud& prev,
   };
 
   const Pose T_planes = result->T_prev_curr;
-  PointToPlaneResult icp =
-      AlignPointToPlane(prev, K, curr, T_planes, D, D.transpose() * result->covariance * D, config);
+  PointToPlaneResult icp = align(D, D.transpose() * result->covariance * D);
   if (!icp.valid) return false;
   std::vector<int> keep = determined(icp, D);
   if (keep.empty()) return false;
@@ -268,8 +265,7 @@ bool FillDegenerateWithPointToPlane(const datasets::OrganizedCloud& prev,
     // Re-run along the determined directions only, so the others stay exactly at the prior.
     Dk.resize(6, keep.size());
     for (std::size_t i = 0; i < keep.size(); ++i) Dk.col(i) = D.col(keep[i]);
-    icp = AlignPointToPlane(prev, K, curr, T_planes, Dk, Dk.transpose() * result->covariance * Dk,
-                            config);
+    icp = align(Dk, Dk.transpose() * result->covariance * Dk);
     if (!icp.valid || determined(icp, Dk).size() != keep.size()) return false;
   }
   // A correction the prior finds implausible (beyond its 99.9% region) is more likely a wrong
@@ -299,6 +295,18 @@ bool FillDegenerateWithPointToPlane(const datasets::OrganizedCloud& prev,
   result->prior_directions = k - static_cast<int>(keep.size());
   for (int i : keep) result->prior_translations -= IsTranslation(D.col(i)) ? 1 : 0;
   return true;
+}
+
+bool FillDegenerateWithPointToPlane(const datasets::OrganizedCloud& prev,
+                                    const datasets::PinholeIntrinsics& K,
+                                    const datasets::OrganizedCloud& curr,
+                                    const PointToPlaneConfig& config, RegistrationResult* result) {
+  const Pose T_planes = result->T_prev_curr;
+  const DirectionAligner align = [&](const Eigen::MatrixXd& D, const Eigen::MatrixXd& prior) {
+    return AlignPointToPlane(prev, K, curr, T_planes, D, prior, config);
+  };
+  return FillDegenerateDirections(
+      align, {config.min_support, config.max_translation_sigma, config.max_rotation_sigma}, result);
 }
 
 }  // namespace planeslam::registration

@@ -29,6 +29,7 @@
 #include "planeslam/mapping/closure_consistency.hpp"
 #include "planeslam/mapping/plane_map.hpp"
 #include "planeslam/mapping/pose_graph.hpp"
+#include "planeslam/registration/depth_local_map.hpp"
 #include "planeslam/registration/local_map.hpp"
 #include "planeslam/registration/plane_association.hpp"
 #include "planeslam/registration/plane_registration.hpp"
@@ -86,6 +87,17 @@ struct SlamConfig {
   /// Fill directions the planes leave open by point-to-plane alignment of the clouds. Off by
   /// default: its corrections on walls seen at a slant are biased.
   bool point_to_plane_fill = false;
+  /// Depth images: fill directions the planes leave open by aligning the pixels outside the
+  /// planes to a fused depth map of recent frames (registration/depth_local_map.hpp). Off by
+  /// default: it makes the two-lap synthetic room's largest error worse (docs/RESULTS.md).
+  bool depth_map_fill = false;
+  registration::DepthMapConfig depth_map;  ///< its settings (the noise model is the sensor's)
+  /// Re-acquisition: once the uncertainty the prior accumulated along directions the planes left
+  /// open exceeds this (1-sigma, world translation) [m], each new keyframe's planes are
+  /// associated with the map's under that uncertainty (Mahalanobis gate) and the pose is pulled
+  /// back onto the map when they pin it down below it. 0 = off, the default: on the synthetic
+  /// room it still moves the pose along directions the drift did not affect.
+  double reacquire_translation_sigma = 0.0;
   /// Optimise the map planes with the poses: every map plane seen from at least two keyframes
   /// becomes a landmark of the pose graph, each keyframe's detection of it a residual, so a wall
   /// ties together keyframes far apart in the chain without a loop closure.
@@ -223,6 +235,8 @@ struct SlamStats {
   std::size_t point_to_plane_frames = 0;  ///< degenerate frames filled by point alignment
   std::size_t prior_frames = 0;  ///< frames with some direction (or all) from the motion prior
   std::size_t untracked_frames = 0;       ///< no usable plane registration (prior used)
+  std::size_t reacquisition_attempts = 0;  ///< keyframes tried against the map after drift
+  std::size_t reacquisitions = 0;          ///< of those, pulled back onto the map
   std::size_t refused_frames = 0;         ///< registration refused by the prior gate (prior used)
   std::size_t optimizations = 0;
   double time_tracking_ms = 0.0;  ///< association + registration, total
@@ -353,6 +367,27 @@ class SlamSystem {
   PoseGraphResult Optimize(std::int64_t first_free = -1);
   /// The map planes seen from two or more keyframes, with those keyframes' detections of them.
   std::vector<PlaneLandmark> PlaneLandmarks() const;
+  /// After directions were left to the prior (drift_covariance_ above the configured sigma), at
+  /// a new keyframe: associates the frame's planes with the map's in Mahalanobis distance under
+  /// that drift and moves the pose onto the map when the pairs pin the drift down; the odometry
+  /// edge from the keyframe (T_keyframe_curr, covariance) takes the correction and the drift's
+  /// uncertainty (slam_reacquisition.cpp). Returns whether it moved the pose.
+  bool Reacquire(const detection::Segmentation& segmentation, std::int64_t keyframe_id,
+                 Pose* T_world_sensor, Pose* T_keyframe_curr, Matrix6d* covariance);
+  /// Adds one frame's prior uncertainty along the directions left to the prior to
+  /// drift_covariance_ (directions in the keyframe's tangent, rotated into the world).
+  void AccumulateDrift(bool use_registration, const registration::RegistrationResult& reg,
+                       const Eigen::Matrix3d& R_world_keyframe);
+  /// Depth images: fuses the frame into the depth map (created with the first frame).
+  void UpdateDepthMap(const datasets::OrganizedCloud& cloud,
+                      const std::vector<std::int32_t>& labels, const Pose& T_world_sensor);
+  /// Depth images: fills the directions the planes left open in a converged `reg` (relative to
+  /// the keyframe) from the depth map, or where it does not pin them down, by projective
+  /// point-to-plane against the keyframe's cloud (point_to_plane_fill). Returns whether the
+  /// points filled a direction.
+  bool FillFromDepthImage(std::int64_t keyframe_id, const datasets::OrganizedCloud& cloud,
+                          const std::vector<std::int32_t>& labels,
+                          registration::RegistrationResult* reg) const;
 
   SlamConfig config_;
   registration::AssociationConfig association_config_;
@@ -365,6 +400,12 @@ class SlamSystem {
   /// Range images (LiDAR): the local map of recent frames' structure that fills the directions
   /// the planes leave open (registration/local_map.hpp); cleared when the graph moves the poses.
   std::unique_ptr<registration::LocalVoxelMap> local_map_;
+  /// Depth images: the fused depth map of recent frames (SlamConfig::depth_map_fill); moved with
+  /// the current keyframe when the graph moves the poses.
+  std::unique_ptr<registration::DepthLocalMap> depth_map_;
+  /// Uncertainty of the current pose in the world (world-aligned (dt, dtheta)) accumulated along
+  /// the directions filled from the motion prior since the map last pinned the pose down.
+  Matrix6d drift_covariance_ = Matrix6d::Zero();
   /// The first range image, until the second frame's motion is bootstrapped from it (no velocity
   /// yet: registration::AlignScansCoarseToFine).
   datasets::OrganizedCloud first_cloud_;

@@ -15,6 +15,7 @@
 #include "planeslam/datasets/trajectory.hpp"
 #include "planeslam/detection/plane.hpp"
 #include "planeslam/detection/plane_detector.hpp"
+#include "planeslam/registration/depth_local_map.hpp"
 #include "planeslam/registration/local_map.hpp"
 #include "planeslam/registration/plane_association.hpp"
 #include "planeslam/registration/plane_registration.hpp"
@@ -28,6 +29,7 @@ struct PlaneOdometryConfig {
   RegistrationConfig registration;
   PointToPlaneConfig point_to_plane;
   LocalMapConfig local_map;
+  DepthMapConfig depth_map;
   /// Fill the planes' degenerate directions from the points: projective point-to-plane against
   /// the previous image for pinhole clouds (point_to_plane), and the structure outside the planes
   /// aligned to a local map of recent scans (local_map) for any organized cloud.
@@ -116,10 +118,12 @@ class PlaneOdometry {
   MotionPrior Predict(double timestamp) const;
   /// Whether a velocity predicts the frame at `timestamp` (else Predict gives "no motion").
   bool HasVelocity(double timestamp) const;
-  /// Fills the directions the planes left open in `reg`: projective point-to-plane against the
-  /// previous cloud when both are pinhole grids of one size, else the alignment of the frame's
-  /// structure points to the local map.
+  /// Fills the directions the planes left open in `reg`: for pinhole clouds the alignment of
+  /// the pixels outside the planes to the depth map of recent frames, or where it does not pin
+  /// them down, projective point-to-plane against the previous cloud (same grid); for other
+  /// clouds the alignment of the frame's structure points to the local map.
   void FillOpenDirections(const datasets::OrganizedCloud& cloud,
+                          const std::vector<std::int32_t>* labels,
                           const std::vector<ShapedPoint>& structure, RegistrationResult* reg);
 
   PlaneOdometryConfig config_;
@@ -133,6 +137,7 @@ class PlaneOdometry {
   std::vector<detection::Plane> prev_planes_;
   datasets::OrganizedCloud prev_cloud_;
   std::unique_ptr<LocalVoxelMap> map_;  ///< created with the first cloud (its voxel size)
+  std::unique_ptr<DepthLocalMap> depth_map_;  ///< pinhole clouds: created with the first one
   VelocityModel velocity_;
   double last_dt_ = 0.0;  ///< interval of the last motion, the prior's unit of time
   std::size_t frames_ = 0;

@@ -10,6 +10,7 @@
 /// D (6 x k, tangent of geometry.hpp) are estimated: T = BoxPlus(T_init, D y), with a Gaussian
 /// prior on y so that directions the clouds do not constrain either stay where they were.
 #include <Eigen/Core>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -73,6 +74,29 @@ PointToPlaneResult AlignPointToPlane(const datasets::OrganizedCloud& prev,
                                      const Eigen::MatrixXd& directions,
                                      const Eigen::MatrixXd& prior_covariance,
                                      const PointToPlaneConfig& config = {});
+
+/// Limits of FillDegenerateDirections: a direction counts as determined by the points when at
+/// least min_support pairs face it and they pin it down better than the sigma (1-sigma) [m, rad].
+struct FillLimits {
+  int min_support = 50;
+  double max_translation_sigma = 0.02;
+  double max_rotation_sigma = 0.01;
+};
+
+/// Aligns along the given directions (6 x k) with the prior N(0, prior_covariance) on their
+/// coefficients, from the registration's pose.
+using DirectionAligner = std::function<PointToPlaneResult(const Eigen::MatrixXd& directions,
+                                                          const Eigen::MatrixXd& prior_covariance)>;
+
+/// The fill shared by every point alignment: runs `align` along result->degenerate_directions
+/// (prior: the result's covariance there) and, when the points pin at least one of them down
+/// (`limits`), takes the aligned pose, replaces the covariance along those directions and sets
+/// used_icp; used_prior stays set when some direction is still undetermined by either. A
+/// correction outside the prior's 99.9% region (chi-square on the directions used) is refused as
+/// a wrong convergence and the prior kept (returns false). `degenerate` and
+/// `degenerate_directions` keep describing the planes. Returns whether the points were used.
+bool FillDegenerateDirections(const DirectionAligner& align, const FillLimits& limits,
+                              RegistrationResult* result);
 
 /// Runs AlignPointToPlane along result->degenerate_directions (prior: the result's covariance
 /// there) and, when the clouds pin at least one of them down (see the config's sigmas), takes
