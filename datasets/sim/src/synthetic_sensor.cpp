@@ -342,6 +342,7 @@ class PinholeCaster final : public CasterBase {
   bool FastLoop(const Primitive& p, int index, const PixelBox& box,
                 std::vector<Hit>& hits) const override {
     if (p.kind != Kind::kPolygon || p.edge_n.size() > kMaxEdges) return false;
+    if (box.r0 > box.r1 || box.c0 > box.c1) return true;  // culled: no pixel to test
     if (p.d == 0.0) return true;  // the plane passes through the eye: s = 0 is never a hit
     const std::size_t m = p.edge_n.size();
     const double sign = p.d > 0.0 ? 1.0 : -1.0, abs_d = std::abs(p.d);
