@@ -100,6 +100,7 @@ nlohmann::json BackEndJson(const mapping::SlamSystem& slam) {
   return {{"optimizations", stats.optimizations},
           {"local_optimizations", stats.local_optimizations},
           {"map_splits", stats.map_splits},
+          {"map_planes_culled", stats.map_planes_culled},
           {"timed_frames", timed},
           {"slam_ms_per_frame_first", timed > 0 ? stats.time_first_frames_ms / timed : 0.0},
           {"slam_ms_per_frame_last", timed > 0 ? stats.time_last_frames_ms / timed : 0.0}};

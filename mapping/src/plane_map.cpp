@@ -349,6 +349,17 @@ void PlaneMap::MergeInto(std::size_t i, std::size_t j) {
   RebuildExtent(merged);
 }
 
+int PlaneMap::Remove(const std::unordered_set<int>& ids) {
+  int removed = 0;
+  for (std::size_t i = planes_.size(); i-- > 0;) {
+    if (ids.count(planes_[i].id) == 0) continue;
+    planes_.erase(planes_.begin() + static_cast<std::ptrdiff_t>(i));
+    extents_.erase(extents_.begin() + static_cast<std::ptrdiff_t>(i));
+    ++removed;
+  }
+  return removed;
+}
+
 int PlaneMap::ResolveId(int id) const {
   int current = id;
   for (auto it = merged_into_.find(current); it != merged_into_.end();

@@ -72,6 +72,9 @@ void SlamSystem::AddKeyframe(std::size_t frame, const Pose& T_world_sensor,
   }
   // The first keyframe anchors the world frame (the optimiser holds it fixed).
   graph_.AddNode(keyframe.id, T_world_sensor, /*fixed=*/keyframe.id == 0);
+  // About 30,000 of the scan's points: every bin of the view gets several.
+  keyframe.view = ViewBins(
+      cloud, static_cast<int>(std::lround(std::sqrt(static_cast<double>(cloud.size()) / 3.0e4))));
   keyframes_.push_back(std::move(keyframe));
   keyframe_frames_.push_back(frame);
   // Kept only for the point-to-plane fill of degenerate directions (a full-resolution copy).
@@ -424,6 +427,7 @@ PoseGraphResult SlamSystem::Finish() {
   map_.MergeCoincidentPlanes(map_config.merge_across_gaps
                                  ? map_config.merge_max_offset
                                  : map_config.refit_merge_across_gaps_offset);
+  CullUnconfirmedPlanes();
   stats_.time_optimize_ms += ElapsedMs(start);
   return result;
 }

@@ -181,6 +181,10 @@ class PlaneMap {
   /// merged plane keeps the smaller id.
   int MergeCoincidentPlanes(double across_gaps_offset = 0.0);
 
+  /// Removes the map planes with these ids (an id removed, or merged into one removed, then
+  /// resolves to -1). Returns how many were removed.
+  int Remove(const std::unordered_set<int>& ids);
+
   const std::vector<MapPlane>& planes() const { return planes_; }
   std::size_t size() const { return planes_.size(); }
   /// The plane with `id`, following merges (an id merged away resolves to its survivor); nullptr

@@ -29,6 +29,7 @@
 #include "planeslam/mapping/closure_consistency.hpp"
 #include "planeslam/mapping/plane_map.hpp"
 #include "planeslam/mapping/pose_graph.hpp"
+#include "planeslam/mapping/view_bins.hpp"
 #include "planeslam/registration/depth_local_map.hpp"
 #include "planeslam/registration/local_map.hpp"
 #include "planeslam/registration/plane_association.hpp"
@@ -231,6 +232,7 @@ struct SlamStats {
   std::size_t closures_injected = 0;   ///< test-hook false closures offered
   std::size_t local_optimizations = 0;  ///< of optimizations, windowed ones
   std::size_t map_splits = 0;  ///< map-plane merges undone (observations no longer agreeing)
+  std::size_t map_planes_culled = 0;  ///< map planes seldom detected where keyframes saw them
   std::size_t degenerate_frames = 0;
   std::size_t point_to_plane_frames = 0;  ///< degenerate frames filled by point alignment
   std::size_t prior_frames = 0;  ///< frames with some direction (or all) from the motion prior
@@ -291,6 +293,7 @@ class SlamSystem {
     /// open.
     std::vector<registration::ShapedPoint> structure;
     std::vector<int> map_planes;  ///< map plane ids its planes joined (ids may since be merged)
+    ViewBins view;  ///< what its scan saw (farthest return per direction), for map-plane culling
   };
   /// A loop registration checked against the map around the old keyframe: the new keyframe's
   /// planes, placed by the closure, that lie within a map plane's extent there, and of those the
@@ -365,6 +368,9 @@ class SlamSystem {
   /// Pose graph with the plane landmarks (only the keyframes from `first_free` on when >= 0),
   /// then the map re-fitted to the new poses.
   PoseGraphResult Optimize(std::int64_t first_free = -1);
+  /// Removes the map planes that keyframes looked at (in view, unoccluded, facing them, within
+  /// the range they were detected at) far more often than they detected them. Returns how many.
+  int CullUnconfirmedPlanes();
   /// The map planes seen from two or more keyframes, with those keyframes' detections of them.
   std::vector<PlaneLandmark> PlaneLandmarks() const;
   /// After directions were left to the prior (drift_covariance_ above the configured sigma), at
