@@ -99,6 +99,7 @@ nlohmann::json BackEndJson(const mapping::SlamSystem& slam) {
       static_cast<double>(std::min<std::size_t>(stats.frames, mapping::SlamStats::kTimedFrames));
   return {{"optimizations", stats.optimizations},
           {"local_optimizations", stats.local_optimizations},
+          {"optimizations_deferred", stats.optimizations_deferred},
           {"map_splits", stats.map_splits},
           {"map_planes_culled", stats.map_planes_culled},
           {"timed_frames", timed},

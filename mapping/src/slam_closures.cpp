@@ -470,9 +470,34 @@ int SlamSystem::DecideClosures(std::int64_t current_id, SlamFrameResult* result)
   return accepted;
 }
 
+bool SlamSystem::ClosuresSatisfied(std::size_t decided_frame) const {
+  for (auto it = closures_.rbegin(); it != closures_.rend(); ++it) {
+    const LoopClosureRecord& record = *it;
+    if (record.status != ClosureStatus::kAccepted || record.decided_frame != decided_frame) {
+      continue;
+    }
+    const Vector6d e = registration::BoxMinus(
+        record.T_from_to,
+        KeyframePose(record.from_keyframe).inverse() * KeyframePose(record.to_keyframe));
+    if (!(e.dot(InformationFromCovariance(record.covariance) * e) <=
+          config_.loop_consistency_chi2)) {
+      return false;
+    }
+  }
+  return true;
+}
+
 void SlamSystem::OptimizeAfterClosures(int accepted, SlamFrameResult* result) {
   const auto start = std::chrono::steady_clock::now();
   const std::int64_t current_id = keyframes_.back().id;
+  // Closures the estimate already satisfies (the residual test an optimisation would apply
+  // afterwards) would move the poses by less than their own noise: they wait in the graph for
+  // the next optimisation. In a place revisited lap after lap most closures are of this kind,
+  // and optimising after each would make the back end's cost grow with the run.
+  if (ClosuresSatisfied(keyframes_.back().frame)) {
+    ++stats_.optimizations_deferred;
+    return;
+  }
   // The latest keyframes are optimised first (warm start from the current poses); when that
   // leaves a new closure unsatisfied (residual chi-square above loop_consistency_chi2) the
   // correction reaches further back and the whole graph is optimised.

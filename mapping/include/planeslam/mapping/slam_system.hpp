@@ -231,6 +231,8 @@ struct SlamStats {
   std::size_t closures_retracted = 0;  ///< accepted, then outliers of the optimisation
   std::size_t closures_injected = 0;   ///< test-hook false closures offered
   std::size_t local_optimizations = 0;  ///< of optimizations, windowed ones
+  /// Keyframes whose accepted closures the estimate already satisfied: no optimisation then.
+  std::size_t optimizations_deferred = 0;
   std::size_t map_splits = 0;  ///< map-plane merges undone (observations no longer agreeing)
   std::size_t map_planes_culled = 0;  ///< map planes seldom detected where keyframes saw them
   std::size_t degenerate_frames = 0;
@@ -371,6 +373,9 @@ class SlamSystem {
   /// Removes the map planes that keyframes looked at (in view, unoccluded, facing them, within
   /// the range they were detected at) far more often than they detected them. Returns how many.
   int CullUnconfirmedPlanes();
+  /// Whether every closure accepted at `decided_frame` has a residual chi-square within
+  /// loop_consistency_chi2 at the current poses.
+  bool ClosuresSatisfied(std::size_t decided_frame) const;
   /// The map planes seen from two or more keyframes, with those keyframes' detections of them.
   std::vector<PlaneLandmark> PlaneLandmarks() const;
   /// After directions were left to the prior (drift_covariance_ above the configured sigma), at
