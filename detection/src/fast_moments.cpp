@@ -613,12 +613,10 @@ __attribute__((target("avx2,fma"))) void SumFourGridsAvx2(const Eigen::Vector3f*
       // in float, as RaySums::Add; pixels at s <= 0 (or NaN) add nothing.
       __m128 s = zf;
       if constexpr (kSpherical) {
-        alignas(16) float range[4];
-        for (int g = 0; g < 4; ++g) {
-          range[g] =
-              internal::PointDepth(points[index(y, j) + static_cast<std::size_t>(g) * k], true);
-        }
-        s = _mm_load_ps(range);
+        // The range, four lanes at once: internal::PointDepth's float operations in Eigen's
+        // order, sqrt(x x + (y y + z z)), so the same values.
+        s = _mm_sqrt_ps(_mm_add_ps(_mm_mul_ps(xf, xf),
+                                   _mm_add_ps(_mm_mul_ps(yf, yf), _mm_mul_ps(zf, zf))));
       }
       const __m128 use = _mm_and_ps(valid, _mm_cmpgt_ps(s, _mm_setzero_ps()));
       const __m128 inv_f = _mm_and_ps(_mm_div_ps(one, s), use);

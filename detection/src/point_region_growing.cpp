@@ -56,8 +56,9 @@ struct NormalSums {
     trace_w = m.wxx + m.wyy + m.wzz;
   }
   /// Adds point p of relative noise w.
-  void Add(const Eigen::Vector3d& n, const Eigen::Vector3d& p, double w) {
-    const double t = n.dot(p);
+  void Add(const Eigen::Vector3d& n, const Eigen::Vector3d& p, double w) { AddAt(n.dot(p), p, w); }
+  /// The same, given t = n.p (the join tests have it already).
+  void AddAt(double t, const Eigen::Vector3d& p, double w) {
     k += 1.0;
     nqn += t * t;
     ns += t;
@@ -99,6 +100,8 @@ struct JoinTest {
   /// Growth::merged and merged_fit hold the region with the point and its plane.
   bool refitted = false;
   double merged_iso = 0;  ///< isotropic MSE of the region with the point
+  /// Accepted without a refit: the region's sums along its normal with the point added.
+  NormalSums along;
 };
 
 /// One PBRG pass over a cloud: the per-pixel state in the workspace and the steps of
@@ -298,23 +301,25 @@ class PbrgPass {
 
   /// The approximate join's distance test of point c (at pc) against region g's current plane.
   /// Its bound is at least its cheap part, the base gamma: within that, no roots needed.
-  bool NearCurrentPlane(int c, const Eigen::Vector3d& pc, const Growth& g) const {
-    const double dist = std::abs(g.fit.normal.dot(pc) - g.fit.d);
+  bool NearCurrentPlane(int c, const Eigen::Vector3d& pc, double t, const Growth& g) const {
+    const double dist = std::abs(t - g.fit.d);
     return dist < params_.gamma || dist < GammaFor(g.fit, g.along.IsotropicMse(), c, pc);
   }
 
-  /// The join test of point c (at pc, relative noise w) for region `g` (Algorithm 1 line 9).
-  /// Between refits (refit_interval != 1), c has passed NearCurrentPlane. A refitting test
-  /// leaves g's moments with c added in g->merged and their plane in g->merged_fit.
-  JoinTest TestJoin(int c, const Eigen::Vector3d& pc, double w, Growth* g) const {
+  /// The join test of point c (at pc, relative noise w, t = n.pc along the region's current
+  /// normal) for region `g` (Algorithm 1 line 9). Between refits (refit_interval != 1), c has
+  /// passed NearCurrentPlane. A refitting test leaves g's moments with c added in g->merged and
+  /// their plane in g->merged_fit.
+  JoinTest TestJoin(int c, const Eigen::Vector3d& pc, double t, double w, Growth* g) const {
     JoinTest test;
     const FastFit& fit = g->fit;
     if (point_.refit_interval != 1) {
       // MSE bound about the current normal, from the sums along it. The bound is at least its
       // cheap part (epsilon of the noise along the normal alone, which the tilt term only
       // raises): within that, no roots.
-      NormalSums m = g->along;
-      m.Add(fit.normal, pc, w);
+      NormalSums& m = test.along;
+      m = g->along;
+      m.AddAt(t, pc, w);
       if (MseAboutWithinEpsilon(m.k, m.nqn, m.ns, m.nwn, params_) ||
           m.MseAbout() < params_.Epsilon(m.EffectiveMse(m.NormalTilt(fit.l2)), m.k)) {
         test.accept = true;
@@ -357,10 +362,10 @@ class PbrgPass {
     return true;
   }
 
-  /// Adds the point just appended to the members (at pc, relative noise w) to the region and
+  /// Adds the point just appended to the members to the region (the test's sums with it) and
   /// updates its plane: the refitted one when the test refitted, else a refit every
   /// refit_interval joins (adaptive: every max(1, K/64)).
-  void Advance(const JoinTest& test, const Eigen::Vector3d& pc, double w, Growth* g) const {
+  void Advance(const JoinTest& test, Growth* g) const {
     g->since_refit += 1.0;
     if (test.refitted) {
       std::swap(g->sums, g->merged);
@@ -370,7 +375,7 @@ class PbrgPass {
       g->since_refit = 0;
       return;
     }
-    g->along.Add(g->fit.normal, pc, w);
+    g->along = test.along;
     const int refit_interval = point_.refit_interval;
     const double interval =
         refit_interval > 0 ? refit_interval : std::max(1.0, g->along.k / 64.0);
@@ -391,18 +396,19 @@ class PbrgPass {
     const double delta_c = params_.Delta(zc);
     if ((pcf - pq).squaredNorm() >= delta_c * delta_c) return;  // dis(GR, p_c) < delta
     const Eigen::Vector3d pc = pcf.cast<double>();
+    const double t = g->fit.normal.dot(pc);
     // Between refits the distance to the current plane turns most points away before their
     // merged moments are formed.
-    if (point_.refit_interval != 1 && !NearCurrentPlane(c, pc, *g)) return;
+    if (point_.refit_interval != 1 && !NearCurrentPlane(c, pc, t, *g)) return;
     const double w = ws_.rel2[c];
-    const JoinTest test = TestJoin(c, pc, w, g);
+    const JoinTest test = TestJoin(c, pc, t, w, g);
     if (!test.accept) return;
     if (owner >= 0 &&
         !TakeJointPoint(c, pc, owner, test.refitted ? g->merged_fit : g->fit, test.merged_iso))
       return;
     ws_.labels[c] = g->r;
     ws_.members.push_back(c);
-    Advance(test, pc, w, g);
+    Advance(test, g);
   }
 
   /// Keeps a grown region of at least theta points as a plane (R); a smaller one goes to R' (its
