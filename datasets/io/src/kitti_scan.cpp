@@ -65,8 +65,14 @@ std::vector<LidarPoint> ReadKittiScan(const std::string& path) {
   return ParseKittiScan(detail::ReadWholeFile(path, GlobalInputLimits().max_points * 16), path);
 }
 
-int RecoverRings(const std::vector<LidarPoint>& scan, std::vector<int>* rings) {
+namespace {
+
+/// RecoverRings, also keeping each point's azimuth atan2(y, x) (NaN where it was not computed:
+/// a non-finite point or one on the z axis) for the projection, which needs the same number.
+int RecoverRingsAndAzimuths(const std::vector<LidarPoint>& scan, std::vector<int>* rings,
+                            std::vector<float>* azimuths) {
   rings->assign(scan.size(), 0);
+  if (azimuths) azimuths->assign(scan.size(), std::numeric_limits<float>::quiet_NaN());
   // KITTI stores each laser as one counter-clockwise sweep that starts just left of straight
   // ahead (azimuth 0+), wraps from +pi to -pi behind the car and ends just right of ahead (0-).
   // A new laser starts where the azimuth crosses from slightly negative to slightly positive
@@ -80,7 +86,9 @@ int RecoverRings(const std::vector<LidarPoint>& scan, std::vector<int>* rings) {
       (*rings)[i] = ring;
       continue;
     }
-    const double az = std::atan2(p.y(), p.x());
+    const float az_float = std::atan2(p.y(), p.x());
+    if (azimuths) (*azimuths)[i] = az_float;
+    const double az = az_float;
     if (std::isfinite(prev)) {
       if (prev > kPi / 2 && az < -kPi / 2) {
         wrapped = true;
@@ -113,6 +121,12 @@ int RecoverRings(const std::vector<LidarPoint>& scan, std::vector<int>* rings) {
   return count;
 }
 
+}  // namespace
+
+int RecoverRings(const std::vector<LidarPoint>& scan, std::vector<int>* rings) {
+  return RecoverRingsAndAzimuths(scan, rings, nullptr);
+}
+
 OrganizedCloud ProjectToRangeImage(const std::vector<LidarPoint>& scan, const SensorConfig& config,
                                    RangeProjectionStats* stats) {
   config.ValidateOrThrow();
@@ -123,8 +137,9 @@ OrganizedCloud ProjectToRangeImage(const std::vector<LidarPoint>& scan, const Se
   std::vector<float> best(static_cast<std::size_t>(rows) * cols,
                           std::numeric_limits<float>::infinity());
   std::vector<int> rings;
+  std::vector<float> azimuths;  // from the ring recovery, else computed below
   if (config.lidar_row_mode == "scan_order") {
-    s.used_scan_order = RecoverRings(scan, &rings) == rows;
+    s.used_scan_order = RecoverRingsAndAzimuths(scan, &rings, &azimuths) == rows;
   }
   for (std::size_t i = 0; i < scan.size(); ++i) {
     const LidarPoint& p = scan[i];
@@ -147,7 +162,8 @@ OrganizedCloud ProjectToRangeImage(const std::vector<LidarPoint>& scan, const Se
         continue;
       }
     }
-    const double az = std::atan2(p.y(), p.x());  // (-pi, pi]
+    const float known = azimuths.empty() ? std::numeric_limits<float>::quiet_NaN() : azimuths[i];
+    const double az = std::isnan(known) ? std::atan2(p.y(), p.x()) : known;  // (-pi, pi]
     const double u = (kPi - az) / (2.0 * kPi) * cols;
     const int col = std::clamp(static_cast<int>(std::floor(u)), 0, cols - 1);
     const std::size_t row_start = static_cast<std::size_t>(row) * cols;
