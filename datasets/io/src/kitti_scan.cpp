@@ -29,23 +29,25 @@ int ElevationRow(double elevation, const SensorConfig& config) {
   return static_cast<int>(row);
 }
 
-}  // namespace
-
-std::vector<LidarPoint> ParseKittiScan(const std::string& bytes, const std::string& name) {
-  if (bytes.empty()) throw IoError(name, "empty scan (0 bytes)");
-  if (bytes.size() % 16 != 0) {
-    throw IoError(name, "truncated or not a KITTI scan: size " + std::to_string(bytes.size()) +
+/// The number of points of a scan of `size` bytes; IoError naming `name` when the size is not
+/// that of a KITTI scan within the input limits.
+std::size_t KittiPointCount(std::size_t size, const std::string& name) {
+  if (size == 0) throw IoError(name, "empty scan (0 bytes)");
+  if (size % 16 != 0) {
+    throw IoError(name, "truncated or not a KITTI scan: size " + std::to_string(size) +
                             " bytes is not a multiple of 16 (float32 x y z reflectance per point)");
   }
-  const std::size_t n = bytes.size() / 16;
+  const std::size_t n = size / 16;
   if (static_cast<std::int64_t>(n) > GlobalInputLimits().max_points) {
     throw IoError(name, std::to_string(n) + " points exceed the input limits");
   }
-  std::vector<LidarPoint> points(n);
-  // Vector4f is 4 packed floats (16 bytes, no padding).
-  std::memcpy(static_cast<void*>(points.data()), bytes.data(), bytes.size());
-  // A KITTI scan lists returns only: a NaN or infinite coordinate is a corrupt file, and a scan
-  // whose points all sit at the origin holds no return.
+  return n;
+}
+
+/// A KITTI scan lists returns only: a NaN or infinite coordinate is a corrupt file, and a scan
+/// whose points all sit at the origin holds no return.
+void CheckKittiPoints(const std::vector<LidarPoint>& points, const std::string& name) {
+  const std::size_t n = points.size();
   bool any_return = false;
   for (std::size_t i = 0; i < n; ++i) {
     const LidarPoint& p = points[i];
@@ -58,11 +60,27 @@ std::vector<LidarPoint> ParseKittiScan(const std::string& bytes, const std::stri
   if (!any_return) {
     throw IoError(name, "empty scan: all " + std::to_string(n) + " points are at the origin");
   }
+}
+
+}  // namespace
+
+std::vector<LidarPoint> ParseKittiScan(const std::string& bytes, const std::string& name) {
+  std::vector<LidarPoint> points(KittiPointCount(bytes.size(), name));
+  // Vector4f is 4 packed floats (16 bytes, no padding).
+  std::memcpy(static_cast<void*>(points.data()), bytes.data(), bytes.size());
+  CheckKittiPoints(points, name);
   return points;
 }
 
 std::vector<LidarPoint> ReadKittiScan(const std::string& path) {
-  return ParseKittiScan(detail::ReadWholeFile(path, GlobalInputLimits().max_points * 16), path);
+  // Read straight into the points: the file is their memory image.
+  std::size_t size = 0;
+  std::ifstream in = detail::OpenWholeFile(path, GlobalInputLimits().max_points * 16, &size);
+  std::vector<LidarPoint> points(KittiPointCount(size, path));
+  in.read(reinterpret_cast<char*>(points.data()), static_cast<std::streamsize>(size));
+  if (static_cast<std::uint64_t>(in.gcount()) != size) throw IoError(path, "read failed");
+  CheckKittiPoints(points, path);
+  return points;
 }
 
 namespace {
