@@ -97,7 +97,7 @@ void ProcessFramesInline(const RunInput& input, const std::vector<std::size_t>& 
     const auto t = Clock::now();
     std::optional<ds::Frame> loaded;
     try {
-      loaded = input.sequence->Load(i);
+      loaded = input.sequence->LoadDecimated(i, run.decimation);
     } catch (const IoError& e) {
       RecordBad(input, i, i == indices.front(), run, session, e);
     }
@@ -129,7 +129,7 @@ void ProcessFramesAhead(const RunInput& input, const std::vector<std::size_t>& i
     const auto t = Clock::now();
     std::optional<ds::Frame> frame;
     try {
-      frame = input.sequence->Load(indices[k]);
+      frame = input.sequence->LoadDecimated(indices[k], run.decimation);
     } catch (const IoError&) {
       ahead.load_error = std::current_exception();
     }

@@ -16,6 +16,7 @@
 #include "kitti_report.hpp"
 #include "pipeline.hpp"
 #include "planeslam/datasets/atomic_file.hpp"
+#include "planeslam/datasets/errors.hpp"
 #include "planeslam/datasets/trajectory_eval.hpp"
 #include "planeslam/datasets/trajectory_io.hpp"
 #include "planeslam/mapping/g2o_io.hpp"
@@ -168,7 +169,13 @@ PreparedFrame RunSession::Prepare(ds::Frame frame, const detection::PlaneDetecto
   const int decimation = run_config().decimation;
   const auto t = Clock::now();
   PreparedFrame prepared;
-  if (decimation > 1) frame.cloud = ds::Decimate(frame.cloud, decimation);
+  // A frame loaded at the run's resolution (Sequence::LoadDecimated) is used as it is.
+  PLANESLAM_CHECK(frame.decimation == 1 || frame.decimation == decimation,
+                  "frame decimated by " << frame.decimation << ", run.decimation " << decimation);
+  if (decimation > 1 && frame.decimation == 1) {
+    frame.cloud = ds::Decimate(frame.cloud, decimation);
+    frame.decimation = decimation;
+  }
   prepared.segmentation = detector.Detect(frame.cloud);
   prepared.detect_ms = MsSince(t);
   prepared.frame = std::move(frame);

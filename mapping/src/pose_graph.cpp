@@ -435,6 +435,12 @@ PoseGraphResult OptimizePoseGraphWindow(PoseGraph& graph,
   options.minimizer_type = ceres::TRUST_REGION;
   options.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
   options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  // Eigen's simplicial LDLT on Ceres' block AMD ordering: the normal equations of a pose graph are
+  // thin (6x6 blocks, a few per row), where CHOLMOD's supernodes and the BLAS calls behind them
+  // cost more than they save; the steps agree to rounding.
+  if (ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::EIGEN_SPARSE)) {
+    options.sparse_linear_algebra_library_type = ceres::EIGEN_SPARSE;
+  }
   options.max_num_iterations = config.max_iterations;
   options.function_tolerance = config.function_tolerance;
   options.gradient_tolerance = config.gradient_tolerance;

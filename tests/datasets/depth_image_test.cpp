@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <random>
 
 #include "planeslam/datasets/errors.hpp"
@@ -106,6 +107,44 @@ TEST(DepthImage, SizeMismatchIsIoErrorNamingSource) {
   } catch (const IoError& e) {
     EXPECT_EQ(std::string(e.what()),
               "frame.png: depth image is 8x5 but the intrinsics are for 7x5");
+  }
+}
+
+// Bit patterns equal, NaN included (a NaN point compares unequal to itself).
+bool SamePoint(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
+  return std::memcmp(a.data(), b.data(), sizeof(float) * 3) == 0;
+}
+
+TEST(DepthImage, DecimatedProjectionIsDecimateOfTheFullOne) {
+  // A randomized family: sizes that are and are not multiples of the factor, every factor the
+  // run accepts, depths with holes and out-of-range values, a flipped y axis now and then.
+  std::mt19937 rng(35);
+  for (int draw = 0; draw < 60; ++draw) {
+    PinholeIntrinsics k;
+    k.width = std::uniform_int_distribution<int>(1, 41)(rng);
+    k.height = std::uniform_int_distribution<int>(1, 33)(rng);
+    k.fx = std::uniform_real_distribution<double>(5.0, 600.0)(rng);
+    k.fy = std::uniform_real_distribution<double>(5.0, 600.0)(rng) * (draw % 5 == 0 ? -1 : 1);
+    k.cx = std::uniform_real_distribution<double>(0.0, k.width)(rng);
+    k.cy = std::uniform_real_distribution<double>(0.0, k.height)(rng);
+    const DepthProjector projector(k, 5000.0, 0.3, draw % 2 ? 8.0 : 0.0);
+    Image16 depth(k.width, k.height);
+    std::uniform_int_distribution<int> raw(0, 65535);
+    for (auto& d : depth.data) d = static_cast<std::uint16_t>(rng() % 4 == 0 ? 0 : raw(rng));
+    OrganizedCloud full;
+    projector.Project(depth, &full);
+    for (int factor = 1; factor <= 16; ++factor) {
+      const OrganizedCloud expected = Decimate(full, factor);
+      OrganizedCloud cloud;
+      projector.Project(depth.data.data(), depth.width, depth.height, &cloud, "d.png", factor);
+      ASSERT_EQ(cloud.width, expected.width) << "draw " << draw << " factor " << factor;
+      ASSERT_EQ(cloud.height, expected.height) << "draw " << draw << " factor " << factor;
+      EXPECT_EQ(cloud.model, SensorModel::kPinhole);
+      for (std::size_t i = 0; i < cloud.points.size(); ++i) {
+        ASSERT_TRUE(SamePoint(cloud.points[i], expected.points[i]))
+            << "draw " << draw << " factor " << factor << " point " << i;
+      }
+    }
   }
 }
 

@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 
@@ -48,6 +49,29 @@ TEST(TumSequence, FirstFrameMatchesDirectDecode) {
     const int u = static_cast<int>(i % 640), v = static_cast<int>(i / 640);
     EXPECT_NEAR(frame.cloud.points[i].x(), (u - 320.1) * raw.data[i] / 5000.0 / 535.4, 1e-5);
     EXPECT_NEAR(frame.cloud.points[i].y(), (v - 247.6) * raw.data[i] / 5000.0 / 539.2, 1e-5);
+  }
+}
+
+TEST(TumSequence, DecimatedLoadIsDecimateOfTheFullLoad) {
+  PLANESLAM_REQUIRE_DATA();
+  const auto seq = OpenSequence(TumDir().string(), SensorConfig{});
+  for (std::size_t index : {std::size_t{0}, std::size_t{131}, std::size_t{251}}) {
+    const Frame full = seq->Load(index);
+    EXPECT_EQ(full.decimation, 1);
+    for (int factor : {2, 3}) {
+      const Frame frame = seq->LoadDecimated(index, factor);
+      const OrganizedCloud expected = Decimate(full.cloud, factor);
+      EXPECT_EQ(frame.decimation, factor);
+      EXPECT_EQ(frame.timestamp, full.timestamp);
+      EXPECT_EQ(frame.source, full.source);
+      ASSERT_EQ(frame.cloud.width, expected.width);
+      ASSERT_EQ(frame.cloud.height, expected.height);
+      ASSERT_EQ(frame.T_world_sensor_gt.has_value(), full.T_world_sensor_gt.has_value());
+      EXPECT_EQ(std::memcmp(frame.cloud.points.data(), expected.points.data(),
+                            expected.points.size() * sizeof(Eigen::Vector3f)),
+                0)
+          << "frame " << index << " factor " << factor;
+    }
   }
 }
 

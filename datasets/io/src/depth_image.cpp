@@ -44,26 +44,31 @@ void DepthProjector::Project(const Image16& depth, OrganizedCloud* cloud,
 }
 
 void DepthProjector::Project(const std::uint16_t* depth, int width, int height,
-                             OrganizedCloud* cloud, const std::string& source) const {
+                             OrganizedCloud* cloud, const std::string& source, int factor) const {
   if (width != intrinsics_.width || height != intrinsics_.height) {
     throw IoError(source, "depth image is " + std::to_string(width) + "x" +
                               std::to_string(height) + " but the intrinsics are for " +
                               std::to_string(intrinsics_.width) + "x" +
                               std::to_string(intrinsics_.height));
   }
-  cloud->width = width;
-  cloud->height = height;
+  PLANESLAM_CHECK(factor >= 1 && factor <= 16, "decimation factor " << factor);
+  // Rounding up keeps the last row and column, as Decimate does.
+  const int out_width = (width + factor - 1) / factor;
+  const int out_height = (height + factor - 1) / factor;
+  cloud->width = out_width;
+  cloud->height = out_height;
   cloud->model = SensorModel::kPinhole;
-  cloud->points.resize(static_cast<std::size_t>(width) * height);
+  cloud->points.resize(static_cast<std::size_t>(out_width) * out_height);
   const float* lut = depth_lut_.data();
-  const std::uint16_t* in = depth;
+  const float* col_factor = col_factor_.data();
   Eigen::Vector3f* out = cloud->points.data();
-  for (int v = 0; v < height; ++v) {
+  for (int v = 0; v < height; v += factor) {
     const float fy = row_factor_[v];
-    for (int u = 0; u < width; ++u, ++in, ++out) {
+    const std::uint16_t* in = depth + static_cast<std::size_t>(v) * width;
+    for (int u = 0; u < width; u += factor, ++out) {
       // NaN propagates through the products, so invalid pixels need no branch.
-      const float z = lut[*in];
-      *out = Eigen::Vector3f(col_factor_[u] * z, fy * z, z);
+      const float z = lut[in[u]];
+      *out = Eigen::Vector3f(col_factor[u] * z, fy * z, z);
     }
   }
 }

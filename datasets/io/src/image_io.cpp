@@ -2,6 +2,9 @@
 
 #include <png.h>
 #include <libdeflate.h>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include <algorithm>
 #include <cmath>
@@ -150,9 +153,46 @@ struct InflateScratch {
   ~InflateScratch() { libdeflate_free_decompressor(d); }
 };
 
+/// Sub filter of a 16-bit row (bytes x, `width` pixels), undone into `out` (host order) and, when
+/// `keep`, back into x. PNG sums each byte lane separately (modulo 256), so eight pixels are a
+/// prefix sum of 16-bit lanes with bytewise adds: three shifted adds, plus the running pixel.
+void UnfilterSub16(unsigned char* x, std::size_t width, bool keep, std::uint16_t* out) {
+  std::size_t c = 0;
+  unsigned char a0 = 0, a1 = 0;
+#if defined(__SSE2__)
+  __m128i carry = _mm_setzero_si128();
+  for (; c + 8 <= width; c += 8) {
+    __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(x + 2 * c));
+    v = _mm_add_epi8(v, _mm_slli_si128(v, 2));
+    v = _mm_add_epi8(v, _mm_slli_si128(v, 4));
+    v = _mm_add_epi8(v, _mm_slli_si128(v, 8));
+    v = _mm_add_epi8(v, carry);
+    if (keep) _mm_storeu_si128(reinterpret_cast<__m128i*>(x + 2 * c), v);
+    // Big-endian samples to host order: swap the two bytes of each lane.
+    const __m128i swapped = _mm_or_si128(_mm_slli_epi16(v, 8), _mm_srli_epi16(v, 8));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out + c), swapped);
+    // The last pixel, broadcast to every lane, carries into the next eight.
+    const __m128i high = _mm_shufflehi_epi16(v, 0xff);
+    carry = _mm_unpackhi_epi64(high, high);
+  }
+  const int last = _mm_cvtsi128_si32(carry) & 0xffff;
+  a0 = static_cast<unsigned char>(last & 0xff);
+  a1 = static_cast<unsigned char>(last >> 8);
+#endif
+  for (; c < width; ++c) {
+    a0 = static_cast<unsigned char>(a0 + x[2 * c]);
+    a1 = static_cast<unsigned char>(a1 + x[2 * c + 1]);
+    out[c] = static_cast<std::uint16_t>((a0 << 8) | a1);
+    if (keep) {
+      x[2 * c] = a0;
+      x[2 * c + 1] = a1;
+    }
+  }
+}
+
 /// Undoes the PNG row filters (PNG spec, section 9) in place, bpp bytes per pixel, and stores
 /// the samples (big-endian in the file) in `image`. Sub, the filter depth cameras use, keeps the
-/// running pixel in registers.
+/// running pixel in registers (16-bit: UnfilterSub16).
 template <int bpp>
 bool UnfilterRows(unsigned char* data, std::size_t rows, std::size_t width, Image16* image) {
   const std::size_t row_bytes = width * bpp;
@@ -167,18 +207,14 @@ bool UnfilterRows(unsigned char* data, std::size_t rows, std::size_t width, Imag
       case 1: {
         // The unfiltered bytes are written back only when the next row refers to them.
         const bool keep = r + 1 < rows && x[row_bytes] >= 2;
-        unsigned char a0 = 0, a1 = 0;
-        for (std::size_t c = 0; c < width; ++c) {
-          a0 = static_cast<unsigned char>(a0 + x[bpp * c]);
-          if constexpr (bpp == 2) {
-            a1 = static_cast<unsigned char>(a1 + x[2 * c + 1]);
-            out[c] = static_cast<std::uint16_t>((a0 << 8) | a1);
-          } else {
-            out[c] = a0;
-          }
-          if (keep) {
-            x[bpp * c] = a0;
-            if constexpr (bpp == 2) x[2 * c + 1] = a1;
+        if constexpr (bpp == 2) {
+          UnfilterSub16(x, width, keep, out);
+        } else {
+          unsigned char a = 0;
+          for (std::size_t c = 0; c < width; ++c) {
+            a = static_cast<unsigned char>(a + x[c]);
+            out[c] = a;
+            if (keep) x[c] = a;
           }
         }
         prior = x;

@@ -29,23 +29,25 @@ int ElevationRow(double elevation, const SensorConfig& config) {
   return static_cast<int>(row);
 }
 
-}  // namespace
-
-std::vector<LidarPoint> ParseKittiScan(const std::string& bytes, const std::string& name) {
-  if (bytes.empty()) throw IoError(name, "empty scan (0 bytes)");
-  if (bytes.size() % 16 != 0) {
-    throw IoError(name, "truncated or not a KITTI scan: size " + std::to_string(bytes.size()) +
+/// The number of points of a scan of `size` bytes; IoError naming `name` when the size is not
+/// that of a KITTI scan within the input limits.
+std::size_t KittiPointCount(std::size_t size, const std::string& name) {
+  if (size == 0) throw IoError(name, "empty scan (0 bytes)");
+  if (size % 16 != 0) {
+    throw IoError(name, "truncated or not a KITTI scan: size " + std::to_string(size) +
                             " bytes is not a multiple of 16 (float32 x y z reflectance per point)");
   }
-  const std::size_t n = bytes.size() / 16;
+  const std::size_t n = size / 16;
   if (static_cast<std::int64_t>(n) > GlobalInputLimits().max_points) {
     throw IoError(name, std::to_string(n) + " points exceed the input limits");
   }
-  std::vector<LidarPoint> points(n);
-  // Vector4f is 4 packed floats (16 bytes, no padding).
-  std::memcpy(static_cast<void*>(points.data()), bytes.data(), bytes.size());
-  // A KITTI scan lists returns only: a NaN or infinite coordinate is a corrupt file, and a scan
-  // whose points all sit at the origin holds no return.
+  return n;
+}
+
+/// A KITTI scan lists returns only: a NaN or infinite coordinate is a corrupt file, and a scan
+/// whose points all sit at the origin holds no return.
+void CheckKittiPoints(const std::vector<LidarPoint>& points, const std::string& name) {
+  const std::size_t n = points.size();
   bool any_return = false;
   for (std::size_t i = 0; i < n; ++i) {
     const LidarPoint& p = points[i];
@@ -58,15 +60,37 @@ std::vector<LidarPoint> ParseKittiScan(const std::string& bytes, const std::stri
   if (!any_return) {
     throw IoError(name, "empty scan: all " + std::to_string(n) + " points are at the origin");
   }
+}
+
+}  // namespace
+
+std::vector<LidarPoint> ParseKittiScan(const std::string& bytes, const std::string& name) {
+  std::vector<LidarPoint> points(KittiPointCount(bytes.size(), name));
+  // Vector4f is 4 packed floats (16 bytes, no padding).
+  std::memcpy(static_cast<void*>(points.data()), bytes.data(), bytes.size());
+  CheckKittiPoints(points, name);
   return points;
 }
 
 std::vector<LidarPoint> ReadKittiScan(const std::string& path) {
-  return ParseKittiScan(detail::ReadWholeFile(path, GlobalInputLimits().max_points * 16), path);
+  // Read straight into the points: the file is their memory image.
+  std::size_t size = 0;
+  std::ifstream in = detail::OpenWholeFile(path, GlobalInputLimits().max_points * 16, &size);
+  std::vector<LidarPoint> points(KittiPointCount(size, path));
+  in.read(reinterpret_cast<char*>(points.data()), static_cast<std::streamsize>(size));
+  if (static_cast<std::uint64_t>(in.gcount()) != size) throw IoError(path, "read failed");
+  CheckKittiPoints(points, path);
+  return points;
 }
 
-int RecoverRings(const std::vector<LidarPoint>& scan, std::vector<int>* rings) {
+namespace {
+
+/// RecoverRings, also keeping each point's azimuth atan2(y, x) (NaN where it was not computed:
+/// a non-finite point or one on the z axis) for the projection, which needs the same number.
+int RecoverRingsAndAzimuths(const std::vector<LidarPoint>& scan, std::vector<int>* rings,
+                            std::vector<float>* azimuths) {
   rings->assign(scan.size(), 0);
+  if (azimuths) azimuths->assign(scan.size(), std::numeric_limits<float>::quiet_NaN());
   // KITTI stores each laser as one counter-clockwise sweep that starts just left of straight
   // ahead (azimuth 0+), wraps from +pi to -pi behind the car and ends just right of ahead (0-).
   // A new laser starts where the azimuth crosses from slightly negative to slightly positive
@@ -80,7 +104,9 @@ int RecoverRings(const std::vector<LidarPoint>& scan, std::vector<int>* rings) {
       (*rings)[i] = ring;
       continue;
     }
-    const double az = std::atan2(p.y(), p.x());
+    const float az_float = std::atan2(p.y(), p.x());
+    if (azimuths) (*azimuths)[i] = az_float;
+    const double az = az_float;
     if (std::isfinite(prev)) {
       if (prev > kPi / 2 && az < -kPi / 2) {
         wrapped = true;
@@ -113,6 +139,12 @@ int RecoverRings(const std::vector<LidarPoint>& scan, std::vector<int>* rings) {
   return count;
 }
 
+}  // namespace
+
+int RecoverRings(const std::vector<LidarPoint>& scan, std::vector<int>* rings) {
+  return RecoverRingsAndAzimuths(scan, rings, nullptr);
+}
+
 OrganizedCloud ProjectToRangeImage(const std::vector<LidarPoint>& scan, const SensorConfig& config,
                                    RangeProjectionStats* stats) {
   config.ValidateOrThrow();
@@ -123,8 +155,9 @@ OrganizedCloud ProjectToRangeImage(const std::vector<LidarPoint>& scan, const Se
   std::vector<float> best(static_cast<std::size_t>(rows) * cols,
                           std::numeric_limits<float>::infinity());
   std::vector<int> rings;
+  std::vector<float> azimuths;  // from the ring recovery, else computed below
   if (config.lidar_row_mode == "scan_order") {
-    s.used_scan_order = RecoverRings(scan, &rings) == rows;
+    s.used_scan_order = RecoverRingsAndAzimuths(scan, &rings, &azimuths) == rows;
   }
   for (std::size_t i = 0; i < scan.size(); ++i) {
     const LidarPoint& p = scan[i];
@@ -147,7 +180,8 @@ OrganizedCloud ProjectToRangeImage(const std::vector<LidarPoint>& scan, const Se
         continue;
       }
     }
-    const double az = std::atan2(p.y(), p.x());  // (-pi, pi]
+    const float known = azimuths.empty() ? std::numeric_limits<float>::quiet_NaN() : azimuths[i];
+    const double az = std::isnan(known) ? std::atan2(p.y(), p.x()) : known;  // (-pi, pi]
     const double u = (kPi - az) / (2.0 * kPi) * cols;
     const int col = std::clamp(static_cast<int>(std::floor(u)), 0, cols - 1);
     const std::size_t row_start = static_cast<std::size_t>(row) * cols;

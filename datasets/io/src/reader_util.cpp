@@ -22,7 +22,7 @@ std::int64_t MaxInputFileBytes() {
   return most * per_point + (1 << 20);
 }
 
-std::string ReadWholeFile(const std::string& path, std::int64_t max_bytes) {
+std::ifstream OpenWholeFile(const std::string& path, std::int64_t max_bytes, std::size_t* size_out) {
   std::error_code ec;
   const auto status = std::filesystem::status(path, ec);
   if (ec || !std::filesystem::exists(status)) throw IoError(path, "no such file");
@@ -35,7 +35,14 @@ std::string ReadWholeFile(const std::string& path, std::int64_t max_bytes) {
   }
   std::ifstream in(path, std::ios::binary);
   if (!in) throw IoError(path, "cannot open file");
-  std::string bytes(static_cast<std::size_t>(size), '\0');
+  *size_out = static_cast<std::size_t>(size);
+  return in;
+}
+
+std::string ReadWholeFile(const std::string& path, std::int64_t max_bytes) {
+  std::size_t size = 0;
+  std::ifstream in = OpenWholeFile(path, max_bytes, &size);
+  std::string bytes(size, '\0');
   in.read(bytes.data(), static_cast<std::streamsize>(size));
   if (static_cast<std::uint64_t>(in.gcount()) != size) throw IoError(path, "read failed");
   return bytes;

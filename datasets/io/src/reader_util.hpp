@@ -2,6 +2,7 @@
 // Private helpers shared by the range-data readers: whole-file reads with size limits, strict
 // number parsing and line splitting. Not part of the public API.
 #include <cstdint>
+#include <fstream>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -11,6 +12,9 @@ namespace planeslam::datasets::detail {
 /// Reads a whole file. Throws IoError naming `path` when it is missing, not a regular file, or
 /// larger than `max_bytes`.
 std::string ReadWholeFile(const std::string& path, std::int64_t max_bytes);
+/// ReadWholeFile's checks (exists, regular, at most max_bytes, opens); returns the open stream
+/// and the file's size, for readers that read straight into their own buffer.
+std::ifstream OpenWholeFile(const std::string& path, std::int64_t max_bytes, std::size_t* size);
 
 /// Largest file any reader accepts: the biggest image/cloud the limits allow, generously sized
 /// (a float32 x y z + 5 extra fields per pixel), so the limits stay the one knob.

@@ -76,7 +76,9 @@ DepthImageSequence::DepthImageSequence(std::string name, std::vector<Item> items
       projector_(intrinsics, depth_scale, min_depth, max_depth),
       depth_scale_(depth_scale) {}
 
-Frame DepthImageSequence::Load(std::size_t index) const {
+Frame DepthImageSequence::Load(std::size_t index) const { return LoadDecimated(index, 1); }
+
+Frame DepthImageSequence::LoadDecimated(std::size_t index, int factor) const {
   PLANESLAM_CHECK(index < items_.size(), "frame " << index << " of " << items_.size());
   const Item& item = items_[index];
   Frame frame;
@@ -89,7 +91,12 @@ Frame DepthImageSequence::Load(std::size_t index) const {
     throw IoError(item.list, item.list_line,
                   "names '" + item.list_entry + "' which does not exist");
   }
-  projector_.Project(ReadPng16(item.path), &frame.cloud, item.path);
+  const Image16 depth = ReadPng16(item.path);
+  PLANESLAM_CHECK(depth.data.size() == static_cast<std::size_t>(depth.width) * depth.height,
+                  "image buffer size mismatch");
+  projector_.Project(depth.data.data(), depth.width, depth.height, &frame.cloud, item.path,
+                     factor);
+  frame.decimation = factor;
   return frame;
 }
 

@@ -25,9 +25,11 @@ class DepthProjector {
   /// Same, into an existing cloud (reuses its storage).
   void Project(const Image16& depth, OrganizedCloud* cloud,
                const std::string& source = "depth image") const;
-  /// Same, from a row-major width x height buffer of raw depth values read in place.
+  /// Same, from a row-major width x height buffer of raw depth values read in place. With
+  /// `factor` > 1 only every factor-th row and column: the cloud Decimate(cloud, factor) would
+  /// give, point for point, without the full-resolution one (1 <= factor <= 16).
   void Project(const std::uint16_t* depth, int width, int height, OrganizedCloud* cloud,
-               const std::string& source = "depth image") const;
+               const std::string& source = "depth image", int factor = 1) const;
 
   const PinholeIntrinsics& intrinsics() const { return intrinsics_; }
 

@@ -16,6 +16,7 @@ struct Frame {
   double timestamp = 0.0;               ///< [s]
   std::string source;                   ///< file it was read from (for messages)
   OrganizedCloud cloud;                 ///< metres, sensor frame
+  int decimation = 1;  ///< cloud holds every n-th row and column of the sensor's grid (Decimate)
   std::optional<Pose> T_world_sensor_gt;  ///< ground-truth pose when the sequence has one
 };
 
@@ -26,6 +27,16 @@ class Sequence {
   virtual ~Sequence() = default;
   virtual std::size_t Size() const = 0;
   virtual Frame Load(std::size_t index) const = 0;
+  /// Load at 1/factor resolution: the same points as Decimate(Load(index).cloud, factor), with
+  /// frame.decimation = factor. Readers that can skip the other pixels override it.
+  virtual Frame LoadDecimated(std::size_t index, int factor) const {
+    Frame frame = Load(index);
+    if (factor > 1) {
+      frame.cloud = Decimate(frame.cloud, factor);
+      frame.decimation = factor;
+    }
+    return frame;
+  }
   /// Human-readable name (folder or scene).
   virtual std::string Name() const = 0;
   /// Timestamp of frame i without loading it.

@@ -51,6 +51,9 @@ class DepthImageSequence : public Sequence {
 
   std::size_t Size() const override { return items_.size(); }
   Frame Load(std::size_t index) const override;
+  /// Back-projects only the pixels kept (the PNG is still decoded whole: its rows depend on
+  /// each other).
+  Frame LoadDecimated(std::size_t index, int factor) const override;
   std::string Name() const override { return name_; }
   double Timestamp(std::size_t index) const override;
   std::optional<Pose> GroundTruth(std::size_t index) const override;
