@@ -6,7 +6,12 @@
 #include <cmath>
 #include <limits>
 
+#include "prior_step.hpp"
+
 namespace planeslam::registration {
+
+using internal::Chi2Quantile999;
+using internal::IsTranslation;
 
 std::vector<std::string> LocalMapConfig::Validate() const {
   std::vector<std::string> p;
@@ -127,28 +132,6 @@ std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, doubl
   }
   return shaped;
 }
-
-namespace {
-
-bool IsTranslation(const Eigen::VectorXd& dir) { return dir.tail<3>().norm() < 1e-9; }
-
-/// chi^2(m) 99.9% quantile by Wilson-Hilferty: m (1 - 2/(9m) + 3.09 sqrt(2/(9m)))^3.
-double Chi2Quantile999(double m) {
-  return m * std::pow(1.0 - 2.0 / (9.0 * m) + 3.09 * std::sqrt(2.0 / (9.0 * m)), 3);
-}
-
-Eigen::MatrixXd InverseOrZero(const Eigen::MatrixXd& a) {
-  const int k = static_cast<int>(a.rows());
-  const Eigen::MatrixXd s = 0.5 * (a + a.transpose());
-  Eigen::LDLT<Eigen::MatrixXd> ldlt(s);
-  if (!s.allFinite() || ldlt.info() != Eigen::Success || !ldlt.isPositive()) {
-    return Eigen::MatrixXd::Zero(k, k);
-  }
-  Eigen::MatrixXd inv = ldlt.solve(Eigen::MatrixXd::Identity(k, k));
-  return inv.allFinite() ? inv : Eigen::MatrixXd::Zero(k, k);
-}
-
-}  // namespace
 
 namespace {
 
@@ -386,11 +369,8 @@ MapAlignmentResult AlignToLocalMap(const LocalVoxelMap& map, const Pose& T_world
   res.information = Eigen::MatrixXd::Zero(k, k);
   res.covariance = prior_covariance;
   res.support.assign(k, 0);
-  if (k == 0 || D.rows() != 6 || prior_covariance.rows() != k || prior_covariance.cols() != k ||
-      map.empty() || source.empty() || !D.allFinite()) {
-    return res;
-  }
-  const Eigen::MatrixXd h_prior = InverseOrZero(prior_covariance);
+  if (!internal::DirectionsUsable(D, prior_covariance) || map.empty() || source.empty()) return res;
+  const Eigen::MatrixXd h_prior = internal::PriorInformation(prior_covariance);
   std::vector<char> is_translation(k);
   for (int i = 0; i < k; ++i) is_translation[i] = IsTranslation(D.col(i));
   // Floor of the residual sigma: neighbouring pairs are correlated, so the information from
@@ -407,14 +387,11 @@ MapAlignmentResult AlignToLocalMap(const LocalVoxelMap& map, const Pose& T_world
     res.residual_rms = std::sqrt(s.sum_sq / s.count);
     const double sigma2 = std::max(sigma_floor2, s.sum_sq / s.count);
     res.information = s.H / sigma2;
-    const Eigen::MatrixXd A = res.information + h_prior;
-    const Eigen::MatrixXd A_reg =
-        A + Eigen::MatrixXd::Identity(k, k) * (1e-12 * std::max(1.0, A.diagonal().maxCoeff()));
-    Eigen::LDLT<Eigen::MatrixXd> ldlt(A_reg);
-    const Eigen::VectorXd step = ldlt.solve(-(s.g / sigma2 + h_prior * y));
-    if (!step.allFinite()) return res;
+    Eigen::VectorXd step;
+    if (!internal::PriorStep(res.information, s.g / sigma2, h_prior, y, &step, &res.covariance)) {
+      return res;
+    }
     y += step;
-    res.covariance = ldlt.solve(Eigen::MatrixXd::Identity(k, k));
     if (step.norm() < 1e-5) {
       res.converged = true;
       break;
