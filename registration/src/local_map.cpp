@@ -41,8 +41,6 @@ std::vector<ScanPoint> StructurePoints(const datasets::OrganizedCloud& cloud,
 
 namespace {
 
-constexpr int kStructureColumnStride = 2;  ///< ScanStructure samples every other column
-
 Eigen::Vector3i VoxelOf(const Eigen::Vector3d& p, double voxel) {
   return (p / voxel).array().floor().cast<int>();
 }
@@ -68,8 +66,7 @@ Eigen::Matrix3d NeighbourhoodShape(const std::vector<const ScanPoint*>& neighbou
   for (const ScanPoint* q : neighbours) {
     cov.noalias() += (q->position - mean) * (q->position - mean).transpose();
   }
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
-  es.computeDirect(cov);  // closed form, cheaper than the iterative solver
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
   const Eigen::Vector3d lambda = es.eigenvalues();  // ascending
   if (!(lambda(2) > 0)) return Eigen::Matrix3d::Zero();
   Eigen::Matrix3d shape = Eigen::Matrix3d::Zero();
@@ -173,19 +170,17 @@ std::vector<ShapedPoint> ThinShapedPoints(const std::vector<ShapedPoint>& points
 
 std::vector<ShapedPoint> ScanStructure(const datasets::OrganizedCloud& cloud,
                                        const std::vector<std::int32_t>* labels, double voxel) {
-  // VoxelDownsample(StructurePoints(cloud, labels), voxel / 2) in one pass over every other
-  // column: neighbouring pixels are far closer than half a voxel (a LiDAR's 0.17 deg azimuth
-  // step is 3 cm at 10 m), so the thinned points hardly change.
+  // VoxelDownsample(StructurePoints(cloud, labels), voxel / 2) in one pass over the cloud.
   const bool use_labels = labels != nullptr && labels->size() == cloud.points.size();
   const double thin = 0.5 * voxel;
-  VoxelIndex seen(cloud.points.size() / 32);
+  VoxelIndex seen(cloud.points.size() / 16);
   std::vector<ScanPoint> thinned;
-  thinned.reserve(cloud.points.size() / 16);
+  thinned.reserve(cloud.points.size() / 8);
   const std::size_t width = static_cast<std::size_t>(cloud.width);
   for (int row = 0; row < cloud.height; ++row) {
     // Neighbouring pixels of a row mostly share a voxel: the last one met skips the hash.
     Eigen::Vector3i last(std::numeric_limits<int>::min(), 0, 0);
-    for (int col = 0; col < cloud.width; col += kStructureColumnStride) {
+    for (int col = 0; col < cloud.width; ++col) {
       const std::size_t i = static_cast<std::size_t>(row) * width + static_cast<std::size_t>(col);
       const Eigen::Vector3f& p = cloud.points[i];
       if (!p.allFinite() || (use_labels && (*labels)[i] >= 1)) continue;
@@ -203,8 +198,8 @@ std::vector<ShapedPoint> ScanStructure(const datasets::OrganizedCloud& cloud,
 
 double ScanReach(const datasets::OrganizedCloud& cloud) {
   std::vector<double> ranges;
-  ranges.reserve(cloud.points.size() / 16 + 1);
-  for (std::size_t i = 0; i < cloud.points.size(); i += 16) {  // a sample is enough
+  ranges.reserve(cloud.points.size() / 4 + 1);
+  for (std::size_t i = 0; i < cloud.points.size(); i += 4) {  // a sample is enough
     if (cloud.points[i].allFinite()) ranges.push_back(cloud.points[i].cast<double>().norm());
   }
   if (ranges.empty()) return 0.0;

@@ -73,8 +73,8 @@ struct ShapedPoint {
 /// surface or an edge, with that shape; blobs and isolated points are left out.
 std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, double radius);
 
-/// What a scan gives the map and the alignment: its structure points (StructurePoints, every
-/// other column) thinned to half a voxel and shaped within one voxel (ShapePoints).
+/// What a scan gives the map and the alignment: its structure points (StructurePoints) thinned to
+/// half a voxel and shaped within one voxel (ShapePoints).
 std::vector<ShapedPoint> ScanStructure(const datasets::OrganizedCloud& cloud,
                                        const std::vector<std::int32_t>* labels, double voxel);
 
