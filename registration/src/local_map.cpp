@@ -196,6 +196,45 @@ std::vector<ShapedPoint> ScanStructure(const datasets::OrganizedCloud& cloud,
   return ShapePoints(thinned, voxel);
 }
 
+namespace {
+
+/// The unit axis of a rank-1 projector a a^T: its column of largest diagonal, normalised.
+Eigen::Vector3d ProjectorAxis(const Eigen::Matrix3d& P) {
+  int j = 0;
+  P.diagonal().maxCoeff(&j);
+  const double norm = P.col(j).norm();
+  return norm > 0 ? Eigen::Vector3d(P.col(j) / norm) : Eigen::Vector3d::UnitZ();
+}
+
+}  // namespace
+
+std::vector<CompactShapedPoint> CompactShapedPoints(const std::vector<ShapedPoint>& points) {
+  std::vector<CompactShapedPoint> out;
+  out.reserve(points.size());
+  for (const ShapedPoint& p : points) {
+    CompactShapedPoint c;
+    c.position = p.position.cast<float>();
+    c.edge = p.shape.trace() > 1.5;
+    const Eigen::Matrix3d rank1 = c.edge ? Eigen::Matrix3d(Eigen::Matrix3d::Identity() - p.shape)
+                                         : p.shape;
+    c.axis = ProjectorAxis(rank1).cast<float>();
+    out.push_back(c);
+  }
+  return out;
+}
+
+std::vector<ShapedPoint> ExpandShapedPoints(const std::vector<CompactShapedPoint>& points) {
+  std::vector<ShapedPoint> out;
+  out.reserve(points.size());
+  for (const CompactShapedPoint& c : points) {
+    const Eigen::Vector3d a = c.axis.cast<double>().normalized();
+    const Eigen::Matrix3d rank1 = a * a.transpose();
+    out.push_back({c.position.cast<double>(),
+                   c.edge ? Eigen::Matrix3d(Eigen::Matrix3d::Identity() - rank1) : rank1});
+  }
+  return out;
+}
+
 double ScanReach(const datasets::OrganizedCloud& cloud) {
   std::vector<double> ranges;
   ranges.reserve(cloud.points.size() / 4 + 1);
