@@ -199,6 +199,7 @@ mapping::SlamFrameResult RunSession::TrackPrepared(std::size_t index, PreparedFr
   if (keep_keyframe_clouds_ && result.keyframe) {
     keyframe_clouds_.emplace_back(static_cast<std::int64_t>(slam_->stats().keyframes - 1),
                                   mapping::VoxelDownsample(frame.cloud.points, keyframe_voxel_));
+    keyframe_clouds_.back().second.shrink_to_fit();  // kept for the whole run
   }
   ++done_;
   return result;

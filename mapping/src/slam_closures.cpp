@@ -183,7 +183,8 @@ bool SlamSystem::FillClosureFromPoints(const Keyframe& old, const Keyframe& curr
     map.Insert(keyframes_[static_cast<std::size_t>(id)].structure, T_old_world * KeyframePose(id),
                0.0);
   }
-  registration::FillDegenerateFromLocalMap(map, Pose::Identity(), current.structure, {}, reg);
+  registration::FillDegenerateFromLocalMap(
+      map, Pose::Identity(), registration::ExpandShapedPoints(current.structure), {}, reg);
   return reg->used_icp && reg->prior_directions == 0;
 }
 

@@ -67,8 +67,8 @@ void SlamSystem::AddKeyframe(std::size_t frame, const Pose& T_world_sensor,
   keyframe.frame = frame;
   keyframe.planes = segmentation.planes;
   if (local_map_ && config_.loop_closure) {
-    keyframe.structure =
-        registration::ThinShapedPoints(structure, kClosureThinning * local_map_->voxel_size());
+    keyframe.structure = registration::CompactShapedPoints(
+        registration::ThinShapedPoints(structure, kClosureThinning * local_map_->voxel_size()));
   }
   // The first keyframe anchors the world frame (the optimiser holds it fixed).
   graph_.AddNode(keyframe.id, T_world_sensor, /*fixed=*/keyframe.id == 0);

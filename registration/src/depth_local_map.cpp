@@ -5,7 +5,11 @@
 #include <algorithm>
 #include <cmath>
 
+#include "prior_step.hpp"
+
 namespace planeslam::registration {
+
+using internal::IsTranslation;
 
 std::vector<std::string> DepthMapConfig::Validate() const {
   std::vector<std::string> p;
@@ -156,7 +160,6 @@ void DepthLocalMap::Insert(const datasets::OrganizedCloud& cloud,
 
 namespace {
 
-bool IsTranslationDirection(const Eigen::VectorXd& dir) { return dir.tail<3>().norm() < 1e-9; }
 
 /// A query pixel: its point (sensor frame), unit ray and depth noise.
 struct Query {
@@ -198,22 +201,11 @@ PointToPlaneResult AlignToDepthMap(const DepthLocalMap& map, const Pose& T_world
   res.information = Eigen::MatrixXd::Zero(k, k);
   res.covariance = prior_covariance;
   res.support.assign(k, 0);
-  if (k == 0 || D.rows() != 6 || prior_covariance.rows() != k || prior_covariance.cols() != k ||
-      map.empty() || curr.empty() || !D.allFinite()) {
-    return res;
-  }
-  Eigen::MatrixXd h_prior = Eigen::MatrixXd::Zero(k, k);
-  {
-    const Eigen::MatrixXd pc = 0.5 * (prior_covariance + prior_covariance.transpose());
-    Eigen::LDLT<Eigen::MatrixXd> ldlt(pc);
-    if (pc.allFinite() && ldlt.info() == Eigen::Success && ldlt.isPositive()) {
-      h_prior = ldlt.solve(Eigen::MatrixXd::Identity(k, k));
-      if (!h_prior.allFinite()) h_prior.setZero();
-    }
-  }
+  if (!internal::DirectionsUsable(D, prior_covariance) || map.empty() || curr.empty()) return res;
+  const Eigen::MatrixXd h_prior = internal::PriorInformation(prior_covariance);
   const std::vector<Query> queries = Queries(map, curr, labels);
   std::vector<char> is_translation(k);
-  for (int i = 0; i < k; ++i) is_translation[i] = IsTranslationDirection(D.col(i));
+  for (int i = 0; i < k; ++i) is_translation[i] = IsTranslation(D.col(i));
   const Pose T_ref_prev = map.T_world_ref().inverse() * T_world_prev;
   const Eigen::Matrix3d R_rp = T_ref_prev.linear();
   const double floor2 = config.sigma_floor * config.sigma_floor;
@@ -284,16 +276,12 @@ PointToPlaneResult AlignToDepthMap(const DepthLocalMap& map, const Pose& T_world
     // The noise model's information, scaled down when the residuals spread wider than it says.
     const double scale = std::max(1.0, sum_chi2 / count);
     res.information = H / scale;
-    const Eigen::MatrixXd A = res.information + h_prior;
-    const Eigen::MatrixXd A_reg =
-        A + Eigen::MatrixXd::Identity(k, k) * (1e-12 * std::max(1.0, A.diagonal().maxCoeff()));
-    const Eigen::VectorXd step = A_reg.ldlt().solve(-(g / scale + h_prior * y));
-    if (!step.allFinite()) {
+    Eigen::VectorXd step;
+    if (!internal::PriorStep(res.information, g / scale, h_prior, y, &step, &res.covariance)) {
       res.valid = false;
       return res;
     }
     y += step;
-    res.covariance = A_reg.ldlt().solve(Eigen::MatrixXd::Identity(k, k));
     if (step.norm() < config.convergence_step) {
       res.converged = true;
       break;

@@ -6,7 +6,12 @@
 #include <cmath>
 #include <limits>
 
+#include "prior_step.hpp"
+
 namespace planeslam::registration {
+
+using internal::Chi2Quantile999;
+using internal::IsTranslation;
 
 std::vector<std::string> LocalMapConfig::Validate() const {
   std::vector<std::string> p;
@@ -106,49 +111,36 @@ std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, doubl
   shaped.reserve(points.size());
   std::vector<const ScanPoint*> neighbours;
   const double r2 = radius * radius;
+  // The points of the 27 voxels around a voxel, kept for the next point when it is in the same
+  // voxel (consecutive pixels of a row mostly are).
+  std::vector<int> candidates;
+  int candidates_of = -1;
   for (std::size_t i = 0; i < points.size(); ++i) {
-    neighbours.clear();
-    const Eigen::Vector3i key = VoxelOf(points[i].position, radius);
-    for (int dx = -1; dx <= 1; ++dx) {
-      for (int dy = -1; dy <= 1; ++dy) {
-        for (int dz = -1; dz <= 1; ++dz) {
-          const int v = index.Find(key + Eigen::Vector3i(dx, dy, dz));
-          if (v < 0) continue;
-          for (int o = start[static_cast<std::size_t>(v)]; o < start[static_cast<std::size_t>(v) + 1];
-               ++o) {
-            const ScanPoint& q = points[static_cast<std::size_t>(order[static_cast<std::size_t>(o)])];
-            if ((q.position - points[i].position).squaredNorm() <= r2) neighbours.push_back(&q);
+    if (voxel_of[i] != candidates_of) {
+      candidates_of = voxel_of[i];
+      candidates.clear();
+      const Eigen::Vector3i key = VoxelOf(points[i].position, radius);
+      for (int dx = -1; dx <= 1; ++dx) {
+        for (int dy = -1; dy <= 1; ++dy) {
+          for (int dz = -1; dz <= 1; ++dz) {
+            const int v = index.Find(key + Eigen::Vector3i(dx, dy, dz));
+            if (v < 0) continue;
+            candidates.insert(candidates.end(), order.begin() + start[static_cast<std::size_t>(v)],
+                              order.begin() + start[static_cast<std::size_t>(v) + 1]);
           }
         }
       }
+    }
+    neighbours.clear();
+    for (const int j : candidates) {
+      const ScanPoint& q = points[static_cast<std::size_t>(j)];
+      if ((q.position - points[i].position).squaredNorm() <= r2) neighbours.push_back(&q);
     }
     const Eigen::Matrix3d shape = NeighbourhoodShape(neighbours);
     if (!shape.isZero()) shaped.push_back({points[i].position, shape});
   }
   return shaped;
 }
-
-namespace {
-
-bool IsTranslation(const Eigen::VectorXd& dir) { return dir.tail<3>().norm() < 1e-9; }
-
-/// chi^2(m) 99.9% quantile by Wilson-Hilferty: m (1 - 2/(9m) + 3.09 sqrt(2/(9m)))^3.
-double Chi2Quantile999(double m) {
-  return m * std::pow(1.0 - 2.0 / (9.0 * m) + 3.09 * std::sqrt(2.0 / (9.0 * m)), 3);
-}
-
-Eigen::MatrixXd InverseOrZero(const Eigen::MatrixXd& a) {
-  const int k = static_cast<int>(a.rows());
-  const Eigen::MatrixXd s = 0.5 * (a + a.transpose());
-  Eigen::LDLT<Eigen::MatrixXd> ldlt(s);
-  if (!s.allFinite() || ldlt.info() != Eigen::Success || !ldlt.isPositive()) {
-    return Eigen::MatrixXd::Zero(k, k);
-  }
-  Eigen::MatrixXd inv = ldlt.solve(Eigen::MatrixXd::Identity(k, k));
-  return inv.allFinite() ? inv : Eigen::MatrixXd::Zero(k, k);
-}
-
-}  // namespace
 
 namespace {
 
@@ -184,17 +176,63 @@ std::vector<ShapedPoint> ScanStructure(const datasets::OrganizedCloud& cloud,
   VoxelIndex seen(cloud.points.size() / 16);
   std::vector<ScanPoint> thinned;
   thinned.reserve(cloud.points.size() / 8);
-  for (std::size_t i = 0; i < cloud.points.size(); ++i) {
-    const Eigen::Vector3f& p = cloud.points[i];
-    if (!p.allFinite() || (use_labels && (*labels)[i] >= 1)) continue;
-    const Eigen::Vector3d position = p.cast<double>();
-    bool inserted = false;
-    seen.Insert(VoxelOf(position, thin), &inserted);
-    if (!inserted) continue;
-    const int row = static_cast<int>(i / static_cast<std::size_t>(cloud.width));
-    thinned.push_back({position, row, static_cast<int>(i) - row * cloud.width});
+  const std::size_t width = static_cast<std::size_t>(cloud.width);
+  for (int row = 0; row < cloud.height; ++row) {
+    // Neighbouring pixels of a row mostly share a voxel: the last one met skips the hash.
+    Eigen::Vector3i last(std::numeric_limits<int>::min(), 0, 0);
+    for (int col = 0; col < cloud.width; ++col) {
+      const std::size_t i = static_cast<std::size_t>(row) * width + static_cast<std::size_t>(col);
+      const Eigen::Vector3f& p = cloud.points[i];
+      if (!p.allFinite() || (use_labels && (*labels)[i] >= 1)) continue;
+      const Eigen::Vector3d position = p.cast<double>();
+      const Eigen::Vector3i key = VoxelOf(position, thin);
+      if (key == last) continue;
+      last = key;
+      bool inserted = false;
+      seen.Insert(key, &inserted);
+      if (inserted) thinned.push_back({position, row, col});
+    }
   }
   return ShapePoints(thinned, voxel);
+}
+
+namespace {
+
+/// The unit axis of a rank-1 projector a a^T: its column of largest diagonal, normalised.
+Eigen::Vector3d ProjectorAxis(const Eigen::Matrix3d& P) {
+  int j = 0;
+  P.diagonal().maxCoeff(&j);
+  const double norm = P.col(j).norm();
+  return norm > 0 ? Eigen::Vector3d(P.col(j) / norm) : Eigen::Vector3d::UnitZ();
+}
+
+}  // namespace
+
+std::vector<CompactShapedPoint> CompactShapedPoints(const std::vector<ShapedPoint>& points) {
+  std::vector<CompactShapedPoint> out;
+  out.reserve(points.size());
+  for (const ShapedPoint& p : points) {
+    CompactShapedPoint c;
+    c.position = p.position.cast<float>();
+    c.edge = p.shape.trace() > 1.5;
+    const Eigen::Matrix3d rank1 = c.edge ? Eigen::Matrix3d(Eigen::Matrix3d::Identity() - p.shape)
+                                         : p.shape;
+    c.axis = ProjectorAxis(rank1).cast<float>();
+    out.push_back(c);
+  }
+  return out;
+}
+
+std::vector<ShapedPoint> ExpandShapedPoints(const std::vector<CompactShapedPoint>& points) {
+  std::vector<ShapedPoint> out;
+  out.reserve(points.size());
+  for (const CompactShapedPoint& c : points) {
+    const Eigen::Vector3d a = c.axis.cast<double>().normalized();
+    const Eigen::Matrix3d rank1 = a * a.transpose();
+    out.push_back({c.position.cast<double>(),
+                   c.edge ? Eigen::Matrix3d(Eigen::Matrix3d::Identity() - rank1) : rank1});
+  }
+  return out;
 }
 
 double ScanReach(const datasets::OrganizedCloud& cloud) {
@@ -386,11 +424,8 @@ MapAlignmentResult AlignToLocalMap(const LocalVoxelMap& map, const Pose& T_world
   res.information = Eigen::MatrixXd::Zero(k, k);
   res.covariance = prior_covariance;
   res.support.assign(k, 0);
-  if (k == 0 || D.rows() != 6 || prior_covariance.rows() != k || prior_covariance.cols() != k ||
-      map.empty() || source.empty() || !D.allFinite()) {
-    return res;
-  }
-  const Eigen::MatrixXd h_prior = InverseOrZero(prior_covariance);
+  if (!internal::DirectionsUsable(D, prior_covariance) || map.empty() || source.empty()) return res;
+  const Eigen::MatrixXd h_prior = internal::PriorInformation(prior_covariance);
   std::vector<char> is_translation(k);
   for (int i = 0; i < k; ++i) is_translation[i] = IsTranslation(D.col(i));
   // Floor of the residual sigma: neighbouring pairs are correlated, so the information from
@@ -407,14 +442,11 @@ MapAlignmentResult AlignToLocalMap(const LocalVoxelMap& map, const Pose& T_world
     res.residual_rms = std::sqrt(s.sum_sq / s.count);
     const double sigma2 = std::max(sigma_floor2, s.sum_sq / s.count);
     res.information = s.H / sigma2;
-    const Eigen::MatrixXd A = res.information + h_prior;
-    const Eigen::MatrixXd A_reg =
-        A + Eigen::MatrixXd::Identity(k, k) * (1e-12 * std::max(1.0, A.diagonal().maxCoeff()));
-    Eigen::LDLT<Eigen::MatrixXd> ldlt(A_reg);
-    const Eigen::VectorXd step = ldlt.solve(-(s.g / sigma2 + h_prior * y));
-    if (!step.allFinite()) return res;
+    Eigen::VectorXd step;
+    if (!internal::PriorStep(res.information, s.g / sigma2, h_prior, y, &step, &res.covariance)) {
+      return res;
+    }
     y += step;
-    res.covariance = ldlt.solve(Eigen::MatrixXd::Identity(k, k));
     if (step.norm() < 1e-5) {
       res.converged = true;
       break;

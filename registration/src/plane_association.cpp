@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <optional>
 #include <tuple>
@@ -328,7 +329,15 @@ class Verifier {
   Verifier(const std::vector<detection::Plane>& prev, const std::vector<detection::Plane>& curr,
            const std::vector<Candidate>& cands, const MotionPrior& prior,
            const AssociationConfig& config, const RegistrationConfig& rc)
-      : prev_(prev), curr_(curr), cands_(cands), prior_(prior), config_(config), rc_(rc) {}
+      : prev_(prev), curr_(curr), cands_(cands), prior_(prior), config_(config), rc_(rc) {
+    // Every candidate's residual form, once: each verification tests all of them.
+    match_data_.resize(cands.size());
+    usable_.resize(cands.size());
+    for (std::size_t k = 0; k < cands.size(); ++k) {
+      usable_[k] = internal::MakeMatchData(prev_, curr_, ToMatch(static_cast<int>(k)), rc_,
+                                           &match_data_[k]);
+    }
+  }
 
   PlaneMatch ToMatch(int k) const { return PlaneMatch{cands_[k].i, cands_[k].j, cands_[k].flip}; }
 
@@ -352,11 +361,9 @@ class Verifier {
   /// Whitened residual (chi^2, 3 dof) of candidate k under motion (R, t) of covariance `cov`.
   double CandidateChi2(int k, const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
                        const Matrix6d& cov) const {
-    internal::MatchData md;
-    if (!internal::MakeMatchData(prev_, curr_, ToMatch(k), rc_, &md)) {
-      return std::numeric_limits<double>::infinity();
-    }
-    const internal::Linearized lin = internal::Linearize(md, R, t, rc_);
+    if (!usable_[static_cast<std::size_t>(k)]) return std::numeric_limits<double>::infinity();
+    const internal::Linearized lin =
+        internal::Linearize(match_data_[static_cast<std::size_t>(k)], R, t, rc_);
     const Eigen::Matrix3d s = lin.cov + lin.J * cov * lin.J.transpose();
     const double c2 = lin.r.dot(s.ldlt().solve(lin.r));
     return std::isfinite(c2) ? c2 : std::numeric_limits<double>::infinity();
@@ -394,17 +401,31 @@ class Verifier {
     return s;
   }
 
+  /// RegisterPlanes of `matches` (in that order), each set solved once: tied cliques often
+  /// verify to the same set, and the set grown from the prior was solved while growing.
+  const RegistrationResult& Solve(const std::vector<PlaneMatch>& matches) const {
+    std::vector<std::tuple<int, int, bool>> key;
+    key.reserve(matches.size());
+    for (const PlaneMatch& m : matches) key.emplace_back(m.prev, m.curr, m.flip_curr);
+    auto it = solved_.find(key);
+    if (it == solved_.end()) {
+      it = solved_.emplace(std::move(key), RegisterPlanes(prev_, curr_, matches, prior_, rc_))
+               .first;
+    }
+    return it->second;
+  }
+
   /// Solves `matches`, keeps the candidates the solution explains, re-solves with those when they
   /// differ from `matches`, and scores the result.
   Hypothesis Evaluate(const std::vector<PlaneMatch>& matches) const {
     Hypothesis h;
-    h.registration = RegisterPlanes(prev_, curr_, matches, prior_, rc_);
+    h.registration = Solve(matches);
     h.matches = AsMatches(ConsistentWith(h.registration.T_prev_curr.linear(),
                                          h.registration.T_prev_curr.translation(),
                                          h.registration.covariance));
     if (!(h.matches.size() == matches.size() &&
           std::is_permutation(h.matches.begin(), h.matches.end(), matches.begin()))) {
-      h.registration = RegisterPlanes(prev_, curr_, h.matches, prior_, rc_);
+      h.registration = Solve(h.matches);
     }
     const RegistrationResult& reg = h.registration;
     const bool off_prior =
@@ -424,7 +445,7 @@ class Verifier {
                                 prior_.covariance)) {
       std::vector<int> trial = kept;
       trial.push_back(k);
-      const RegistrationResult reg = RegisterPlanes(prev_, curr_, AsMatches(trial), prior_, rc_);
+      const RegistrationResult& reg = Solve(AsMatches(trial));
       const Eigen::Matrix3d R = reg.T_prev_curr.linear();
       const Eigen::Vector3d t = reg.T_prev_curr.translation();
       const bool explained = std::all_of(trial.begin(), trial.end(), [&](int j) {
@@ -442,6 +463,9 @@ class Verifier {
   const MotionPrior& prior_;
   const AssociationConfig& config_;
   const RegistrationConfig& rc_;
+  std::vector<internal::MatchData> match_data_;  ///< per candidate
+  std::vector<char> usable_;                     ///< per candidate: match_data_ is valid
+  mutable std::map<std::vector<std::tuple<int, int, bool>>, RegistrationResult> solved_;
 };
 
 /// Keeps `h` in `best` when there is none yet or `h` scores lower (earlier ones win ties).

@@ -5,7 +5,12 @@
 #include <algorithm>
 #include <cmath>
 
+#include "prior_step.hpp"
+
 namespace planeslam::registration {
+
+using internal::Chi2Quantile999;
+using internal::IsTranslation;
 
 std::vector<std::string> PointToPlaneConfig::Validate() const {
   std::vector<std::string> p;
@@ -102,8 +107,6 @@ bool NormalAt(const datasets::OrganizedCloud& cloud, int row, int col, int s, do
   return true;
 }
 
-bool IsTranslation(const Eigen::VectorXd& dir) { return dir.tail<3>().norm() < 1e-9; }
-
 }  // namespace
 
 PointToPlaneResult AlignPointToPlane(const datasets::OrganizedCloud& prev,
@@ -118,19 +121,8 @@ PointToPlaneResult AlignPointToPlane(const datasets::OrganizedCloud& prev,
   res.information = Eigen::MatrixXd::Zero(k, k);
   res.covariance = prior_covariance;
   res.support.assign(k, 0);
-  if (k == 0 || D.rows() != 6 || prior_covariance.rows() != k || prior_covariance.cols() != k ||
-      prev.empty() || curr.empty() || !D.allFinite()) {
-    return res;
-  }
-  Eigen::MatrixXd h_prior = Eigen::MatrixXd::Zero(k, k);
-  {
-    const Eigen::MatrixXd pc = 0.5 * (prior_covariance + prior_covariance.transpose());
-    Eigen::LDLT<Eigen::MatrixXd> ldlt(pc);
-    if (pc.allFinite() && ldlt.info() == Eigen::Success && ldlt.isPositive()) {
-      h_prior = ldlt.solve(Eigen::MatrixXd::Identity(k, k));
-      if (!h_prior.allFinite()) h_prior.setZero();
-    }
-  }
+  if (!internal::DirectionsUsable(D, prior_covariance) || prev.empty() || curr.empty()) return res;
+  const Eigen::MatrixXd h_prior = internal::PriorInformation(prior_covariance);
   const int s = config.pixel_stride;
   // Per direction, once: translation or rotation (it decides what "facing" means per pair).
   std::vector<char> is_translation(k);
@@ -207,18 +199,12 @@ PointToPlaneResult AlignPointToPlane(const datasets::OrganizedCloud& prev,
     // information is optimistic; the floor keeps it in check).
     const double sigma2 = std::max(config.point_sigma * config.point_sigma, sum_sq / count);
     res.information = H / sigma2;
-    const Eigen::MatrixXd A = res.information + h_prior;
-    // With no prior and no structure A may be singular: a tiny ridge keeps the step defined
-    // (those directions do not move).
-    const Eigen::MatrixXd A_reg =
-        A + Eigen::MatrixXd::Identity(k, k) * (1e-12 * std::max(1.0, A.diagonal().maxCoeff()));
-    const Eigen::VectorXd step = A_reg.ldlt().solve(-(g / sigma2 + h_prior * y));
-    if (!step.allFinite()) {
+    Eigen::VectorXd step;
+    if (!internal::PriorStep(res.information, g / sigma2, h_prior, y, &step, &res.covariance)) {
       res.valid = false;
       return res;
     }
     y += step;
-    res.covariance = A_reg.ldlt().solve(Eigen::MatrixXd::Identity(k, k));
     if (step.norm() < config.convergence_step) {
       res.converged = true;
       break;
@@ -275,10 +261,7 @@ bool FillDegenerateDirections(const DirectionAligner& align, const FillLimits& l
     const Eigen::VectorXd y = Dk.transpose() * change;
     const Eigen::MatrixXd prior_y = Dk.transpose() * result->covariance * Dk;
     const double m2 = y.dot(prior_y.ldlt().solve(y));
-    // chi^2(m) 99.9% quantile by Wilson-Hilferty: m (1 - 2/(9m) + 3.09 sqrt(2/(9m)))^3.
-    const double m = static_cast<double>(y.size());
-    const double q = m * std::pow(1.0 - 2.0 / (9.0 * m) + 3.09 * std::sqrt(2.0 / (9.0 * m)), 3);
-    if (!(m2 <= q)) return false;
+    if (!(m2 <= Chi2Quantile999(static_cast<double>(y.size())))) return false;
   }
   // Covariance: unchanged outside span(Dk) (the directions are orthonormal), the alignment's
   // posterior inside.

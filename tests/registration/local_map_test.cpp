@@ -170,5 +170,45 @@ TEST(LocalMap, RecoversMotionAlongASingleWallFromALidarScan) {
   EXPECT_LE(failures, 1) << "of " << draws << " draws";  // budget: one draw in eight
 }
 
+TEST(LocalMap, CompactShapedPointsKeepPositionsAndShapes) {
+  // A street-like scan (ground, a wall, boxes as clutter): surfaces and edges both occur.
+  std::mt19937 rng(35);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  datasets::SyntheticScene scene = planeslam::test::SceneOf(
+      {{Eigen::Vector3d::UnitZ(), 0.0}, {-Eigen::Vector3d::UnitY(), -4.0}});
+  for (int i = 0; i < 12; ++i) {
+    const double x = -20.0 + 40.0 * unit(rng), y = -6.0 + 8.0 * unit(rng);
+    const double size = 0.3 + 0.7 * unit(rng);
+    AddBox({x, y, 0.0}, {x + size, y + size, 2.0 * size}, scene);
+  }
+  datasets::SphericalSimConfig lidar;
+  lidar.azimuth_resolution_deg = 0.4;
+  lidar.elevation_min_deg = -25.0;
+  lidar.elevation_max_deg = 5.0;
+  lidar.elevation_resolution_deg = 0.5;
+  lidar.max_range = 40.0;
+  lidar.range_sigma = 0.02;
+  Pose T_world_sensor = Pose::Identity();
+  T_world_sensor.translation() << 0.0, 0.0, 1.7;
+  const datasets::SyntheticRender render =
+      datasets::MakeSphericalSensor(scene, lidar)->Render(T_world_sensor, 1);
+  const std::vector<ShapedPoint> points =
+      ScanStructure(render.cloud, nullptr, ScanReach(render.cloud) / 100.0);
+  ASSERT_GT(points.size(), 100u);
+  const std::vector<ShapedPoint> back = ExpandShapedPoints(CompactShapedPoints(points));
+  ASSERT_EQ(back.size(), points.size());
+  int surfaces = 0, edges = 0;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const double trace = points[i].shape.trace();
+    (trace > 1.5 ? edges : surfaces) += 1;
+    // Float positions: a few micrometres at tens of metres; shapes to float precision.
+    EXPECT_LT((back[i].position - points[i].position).norm(), 1e-5) << i;
+    EXPECT_LT((back[i].shape - points[i].shape).norm(), 1e-6) << i;
+  }
+  EXPECT_GT(surfaces, 0);
+  EXPECT_GT(edges, 0);
+  EXPECT_LE(sizeof(CompactShapedPoint), 28u);
+}
+
 }  // namespace
 }  // namespace planeslam::registration

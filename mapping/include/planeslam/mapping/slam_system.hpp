@@ -293,7 +293,7 @@ class SlamSystem {
     /// Range images: the structure outside the planes (sensor frame, thinned to the alignment's
     /// spacing), for the point alignment of loop closures along the directions the planes leave
     /// open.
-    std::vector<registration::ShapedPoint> structure;
+    std::vector<registration::CompactShapedPoint> structure;
     std::vector<int> map_planes;  ///< map plane ids its planes joined (ids may since be merged)
     ViewBins view;  ///< what its scan saw (farthest return per direction), for map-plane culling
   };

@@ -81,6 +81,21 @@ std::vector<ShapedPoint> ScanStructure(const datasets::OrganizedCloud& cloud,
 /// One shaped point per occupied voxel of edge `voxel` (the first one met), in input order.
 std::vector<ShapedPoint> ThinShapedPoints(const std::vector<ShapedPoint>& points, double voxel);
 
+/// A shaped point stored for later (a SLAM keyframe's structure for loop closures): floats and
+/// the shape's axis, 28 bytes where a ShapedPoint takes 96. The shapes ShapePoints makes are
+/// projectors of rank 1 (a surface: n n^T, axis n) or rank 2 (an edge or a pole: I - a a^T,
+/// axis a along it).
+struct CompactShapedPoint {
+  Eigen::Vector3f position = Eigen::Vector3f::Zero();
+  Eigen::Vector3f axis = Eigen::Vector3f::UnitZ();
+  bool edge = false;  ///< rank 2: the shape constrains the plane across `axis`
+};
+
+/// `points` stored compactly (a shape of trace above 1.5 counts as rank 2).
+std::vector<CompactShapedPoint> CompactShapedPoints(const std::vector<ShapedPoint>& points);
+/// The shaped points back from their compact form (to float precision).
+std::vector<ShapedPoint> ExpandShapedPoints(const std::vector<CompactShapedPoint>& points);
+
 class LocalVoxelMap {
  public:
   struct MapPoint {
@@ -94,6 +109,11 @@ class LocalVoxelMap {
   /// farther than `reach` from the sensor (no pruning when reach <= 0).
   void Insert(const std::vector<ShapedPoint>& points_sensor, const Pose& T_world_sensor,
               double reach);
+  /// The same from compactly stored points.
+  void Insert(const std::vector<CompactShapedPoint>& points_sensor, const Pose& T_world_sensor,
+              double reach) {
+    Insert(ExpandShapedPoints(points_sensor), T_world_sensor, reach);
+  }
   /// The nearest map point to q (world) among the 27 voxels around it whose shape agrees with
   /// `shape` (world; same kind, axes within about 20 deg), or null.
   const MapPoint* Nearest(const Eigen::Vector3d& q, const Eigen::Matrix3d& shape) const;
