@@ -58,6 +58,33 @@ SlamSystem::SlamSystem(const SlamConfig& config, const registration::Association
   paths_ = std::make_unique<GraphPaths>(graph_, kPathSearchNodes);
 }
 
+namespace {
+/// The extents' settings: the sensor's noise model (as the depth map's).
+registration::PlaneExtentConfig ExtentConfig(const SlamConfig& config) {
+  registration::PlaneExtentConfig extent;
+  extent.sigma0 = config.depth_map.sigma0;
+  extent.sigma_z2 = config.depth_map.sigma_z2;
+  return extent;
+}
+
+/// The directions the planes and the points left open, from the planes whose whole outline the
+/// keyframe and the frame both see (registration/plane_extent.hpp).
+void FillFromExtents(const SlamConfig& config,
+                     const std::vector<detection::Plane>& keyframe_planes,
+                     const std::vector<registration::PlaneExtent>& keyframe_extents,
+                     const datasets::OrganizedCloud& cloud,
+                     const detection::Segmentation& segmentation,
+                     registration::RegistrationResult* reg) {
+  if (!reg->converged || !reg->degenerate || reg->used_icp) return;
+  registration::FillDegenerateFromExtents(
+      keyframe_planes, keyframe_extents, segmentation.planes,
+      registration::ComputePlaneExtents(cloud, segmentation.labels, segmentation.planes,
+                                        ExtentConfig(config)),
+      ExtentConfig(config), reg);
+}
+
+}  // namespace
+
 void SlamSystem::AddKeyframe(std::size_t frame, const Pose& T_world_sensor,
                              const detection::Segmentation& segmentation,
                              const datasets::OrganizedCloud& cloud,
@@ -66,6 +93,8 @@ void SlamSystem::AddKeyframe(std::size_t frame, const Pose& T_world_sensor,
   keyframe.id = static_cast<std::int64_t>(keyframes_.size());
   keyframe.frame = frame;
   keyframe.planes = segmentation.planes;
+  keyframe.extents = registration::ComputePlaneExtents(cloud, segmentation.labels,
+                                                       segmentation.planes, ExtentConfig(config_));
   if (local_map_ && config_.loop_closure) {
     keyframe.structure = registration::CompactShapedPoints(
         registration::ThinShapedPoints(structure, kClosureThinning * local_map_->voxel_size()));
@@ -233,6 +262,7 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
       keyframe.planes, segmentation.planes, prior, association_config_, registration_config_);
   registration::RegistrationResult reg = association.registration;
   result.used_point_to_plane = FillFromDepthImage(keyframe.id, cloud, segmentation.labels, &reg);
+  FillFromExtents(config_, keyframe.planes, keyframe.extents, cloud, segmentation, &reg);
   if (reg.converged && local_map_ && !structure.empty()) {
     result.used_point_to_plane =
         AlignToLocalMap(*local_map_, KeyframePose(keyframe.id), structure, &reg);

@@ -571,6 +571,7 @@ std::string ConstraintSource(const RegistrationResult& result) {
   std::string out;
   auto add = [&](const char* part) { out += (out.empty() ? "" : "+") + std::string(part); };
   if (result.degenerate_directions.size() < 6) add("planes");
+  if (result.extent_directions > 0) add("extent");
   if (result.point_directions > 0) add("points");
   if (result.prior_directions > 0 || out.empty()) add("prior");
   return out;

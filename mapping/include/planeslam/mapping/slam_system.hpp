@@ -33,6 +33,7 @@
 #include "planeslam/registration/depth_local_map.hpp"
 #include "planeslam/registration/local_map.hpp"
 #include "planeslam/registration/plane_association.hpp"
+#include "planeslam/registration/plane_extent.hpp"
 #include "planeslam/registration/plane_registration.hpp"
 #include "planeslam/registration/point_to_plane.hpp"
 #include "planeslam/registration/velocity_model.hpp"
@@ -290,6 +291,8 @@ class SlamSystem {
     std::int64_t id = 0;
     std::size_t frame = 0;
     std::vector<detection::Plane> planes;
+    /// Per plane: its outline when wholly in view, for the directions the planes leave open.
+    std::vector<registration::PlaneExtent> extents;
     /// Range images: the structure outside the planes (sensor frame, thinned to the alignment's
     /// spacing), for the point alignment of loop closures along the directions the planes leave
     /// open.

@@ -186,8 +186,8 @@ bool RefineWithLocalMap(const LocalVoxelMap& map, const Pose& T_world_prev,
                         const std::vector<ShapedPoint>& source, const LocalMapConfig& config,
                         RegistrationResult* result);
 
-/// What constrained a registration: "planes", "points", "prior" joined by '+' in that order
-/// (e.g. "planes+points"); from its flags and direction counts.
+/// What constrained a registration: "planes", "extent", "points", "prior" joined by '+' in that
+/// order (e.g. "planes+points"); from its flags and direction counts.
 std::string ConstraintSource(const RegistrationResult& result);
 
 }  // namespace planeslam::registration

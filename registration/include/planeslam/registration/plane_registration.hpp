@@ -90,8 +90,9 @@ struct RegistrationResult {
   /// pure translation (corridor axis) or a pure rotation axis.
   std::vector<Vector6d> degenerate_directions;
   bool used_prior = false;  ///< some degenerate direction was filled from the prior
-  bool used_icp = false;    ///< some degenerate direction was filled by point-to-plane alignment
+  bool used_icp = false;    ///< some degenerate direction was filled by points or extents
   int point_directions = 0;  ///< degenerate directions the point alignment determined
+  int extent_directions = 0;  ///< degenerate directions complete planes' extents determined
   int prior_directions = 0;  ///< degenerate directions left to the prior
   int prior_translations = 0;  ///< of those, translation directions
   std::vector<PlaneMatch> inliers;  ///< the matches used
