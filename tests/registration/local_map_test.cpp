@@ -165,7 +165,9 @@ TEST(LocalMap, RecoversMotionAlongASingleWallFromALidarScan) {
         map, T_world_prev, ScanStructure(curr.cloud, &curr_labels, voxel), {}, &reg);
     const double error = (reg.T_prev_curr.translation() - T_prev_curr.translation()).x();
     if (!used || reg.prior_translations > 0 || std::abs(error) > 0.03) ++failures;
-    if (used) EXPECT_EQ(ConstraintSource(reg), "planes+points");
+    if (used) {
+      EXPECT_EQ(ConstraintSource(reg), "planes+points");
+    }
   }
   EXPECT_LE(failures, 1) << "of " << draws << " draws";  // budget: one draw in eight
 }
