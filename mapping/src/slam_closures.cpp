@@ -471,21 +471,18 @@ int SlamSystem::DecideClosures(std::int64_t current_id, SlamFrameResult* result)
   return accepted;
 }
 
+bool SlamSystem::ClosureSatisfied(const LoopClosureRecord& record) const {
+  const Vector6d e = registration::BoxMinus(
+      record.T_from_to,
+      KeyframePose(record.from_keyframe).inverse() * KeyframePose(record.to_keyframe));
+  return e.dot(InformationFromCovariance(record.covariance) * e) <= config_.loop_consistency_chi2;
+}
+
 bool SlamSystem::ClosuresSatisfied(std::size_t decided_frame) const {
-  for (auto it = closures_.rbegin(); it != closures_.rend(); ++it) {
-    const LoopClosureRecord& record = *it;
-    if (record.status != ClosureStatus::kAccepted || record.decided_frame != decided_frame) {
-      continue;
-    }
-    const Vector6d e = registration::BoxMinus(
-        record.T_from_to,
-        KeyframePose(record.from_keyframe).inverse() * KeyframePose(record.to_keyframe));
-    if (!(e.dot(InformationFromCovariance(record.covariance) * e) <=
-          config_.loop_consistency_chi2)) {
-      return false;
-    }
-  }
-  return true;
+  return std::all_of(closures_.begin(), closures_.end(), [&](const LoopClosureRecord& record) {
+    return record.status != ClosureStatus::kAccepted || record.decided_frame != decided_frame ||
+           ClosureSatisfied(record);
+  });
 }
 
 void SlamSystem::OptimizeAfterClosures(int accepted, SlamFrameResult* result) {
@@ -512,11 +509,7 @@ void SlamSystem::OptimizeAfterClosures(int accepted, SlamFrameResult* result) {
       const LoopClosureRecord& record = closures_[k];
       if (record.status != ClosureStatus::kAccepted || record.to_keyframe != current_id) continue;
       --accepted;
-      const Vector6d e =
-          registration::BoxMinus(record.T_from_to, KeyframePose(record.from_keyframe).inverse() *
-                                                       KeyframePose(current_id));
-      whole =
-          e.dot(InformationFromCovariance(record.covariance) * e) > config_.loop_consistency_chi2;
+      whole = !ClosureSatisfied(record);
     }
   }
   if (whole) Optimize();

@@ -31,6 +31,10 @@ constexpr int kMinLooks = 5;
 }  // namespace
 
 int SlamSystem::CullUnconfirmedPlanes() {
+  std::vector<Pose> T_sensor_world(keyframes_.size());
+  for (const Keyframe& keyframe : keyframes_) {
+    T_sensor_world[static_cast<std::size_t>(keyframe.id)] = KeyframePose(keyframe.id).inverse();
+  }
   std::unordered_set<int> culled;
   const double cos_gate = std::cos(config_.landmark_gate_deg * M_PI / 180.0);
   for (const MapPlane& plane : map_.planes()) {
@@ -58,12 +62,12 @@ int SlamSystem::CullUnconfirmedPlanes() {
     int looks = static_cast<int>(detected.size());
     for (const Keyframe& keyframe : keyframes_) {
       if (detected.count(keyframe.id) > 0 || keyframe.view.empty()) continue;
-      const Pose T_sensor_world = KeyframePose(keyframe.id).inverse();
-      if ((T_sensor_world * plane.centroid).norm() > kRangeFactor * longest) continue;
-      const Eigen::Vector3d n_sensor = T_sensor_world.linear() * plane.normal;
+      const Pose& T = T_sensor_world[static_cast<std::size_t>(keyframe.id)];
+      if ((T * plane.centroid).norm() > kRangeFactor * longest) continue;
+      const Eigen::Vector3d n_sensor = T.linear() * plane.normal;
       int facing = 0, reached = 0;
       for (const Eigen::Vector3d& sample : samples) {
-        const Eigen::Vector3d p = T_sensor_world * sample;
+        const Eigen::Vector3d p = T * sample;
         const double range = p.norm();
         // The normal points away from the sensors that see the plane's front.
         if (!(n_sensor.dot(p) >= kMinViewCosine * range)) continue;

@@ -97,9 +97,8 @@ TEST(LocalMap, RecoversCorridorAxisFromClutterOverRandomDraws) {
 // over the ground, random boxes on the ground and against the wall. Ground and wall leave the
 // motion along the wall open; the boxes' points (the scanner's labels say which pixels are the
 // ground and the wall) must recover it against the map of the previous scan.
-TEST(LocalMap, RecoversMotionAlongASingleWallFromALidarScan) {
-  std::mt19937 rng(34);
-  std::uniform_real_distribution<double> step(0.3, 1.0), prior_error(-0.1, 0.1), unit(0.0, 1.0);
+/// A coarse rotating scanner looking down on a street: 0.4 x 0.5 deg, 2 cm range noise.
+datasets::SphericalSimConfig StreetScanner() {
   datasets::SphericalSimConfig lidar;
   lidar.azimuth_resolution_deg = 0.4;
   lidar.elevation_min_deg = -25.0;
@@ -107,6 +106,13 @@ TEST(LocalMap, RecoversMotionAlongASingleWallFromALidarScan) {
   lidar.elevation_resolution_deg = 0.5;
   lidar.max_range = 40.0;
   lidar.range_sigma = 0.02;
+  return lidar;
+}
+
+TEST(LocalMap, RecoversMotionAlongASingleWallFromALidarScan) {
+  std::mt19937 rng(34);
+  std::uniform_real_distribution<double> step(0.3, 1.0), prior_error(-0.1, 0.1), unit(0.0, 1.0);
+  const datasets::SphericalSimConfig lidar = StreetScanner();
   int failures = 0;
   const int draws = 8;
   for (int draw = 0; draw < draws; ++draw) {
@@ -183,13 +189,7 @@ TEST(LocalMap, CompactShapedPointsKeepPositionsAndShapes) {
     const double size = 0.3 + 0.7 * unit(rng);
     AddBox({x, y, 0.0}, {x + size, y + size, 2.0 * size}, scene);
   }
-  datasets::SphericalSimConfig lidar;
-  lidar.azimuth_resolution_deg = 0.4;
-  lidar.elevation_min_deg = -25.0;
-  lidar.elevation_max_deg = 5.0;
-  lidar.elevation_resolution_deg = 0.5;
-  lidar.max_range = 40.0;
-  lidar.range_sigma = 0.02;
+  const datasets::SphericalSimConfig lidar = StreetScanner();
   Pose T_world_sensor = Pose::Identity();
   T_world_sensor.translation() << 0.0, 0.0, 1.7;
   const datasets::SyntheticRender render =

@@ -376,8 +376,10 @@ class SlamSystem {
   /// Removes the map planes that keyframes looked at (in view, unoccluded, facing them, within
   /// the range they were detected at) far more often than they detected them. Returns how many.
   int CullUnconfirmedPlanes();
-  /// Whether every closure accepted at `decided_frame` has a residual chi-square within
-  /// loop_consistency_chi2 at the current poses.
+  /// Whether the closure's residual chi-square at the current poses is within
+  /// loop_consistency_chi2.
+  bool ClosureSatisfied(const LoopClosureRecord& record) const;
+  /// Whether every closure accepted at `decided_frame` is satisfied.
   bool ClosuresSatisfied(std::size_t decided_frame) const;
   /// The map planes seen from two or more keyframes, with those keyframes' detections of them.
   std::vector<PlaneLandmark> PlaneLandmarks() const;
