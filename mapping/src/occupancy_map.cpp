@@ -30,41 +30,61 @@ std::vector<std::string> OccupancyMapConfig::Validate() const {
 
 namespace {
 
-/// A point's voxel key and its index in the input.
-struct KeyedPoint {
+/// The points of one voxel: key, sums and count.
+struct VoxelSum {
   std::uint64_t key;
-  std::uint32_t index;
+  Eigen::Vector3d sum;
+  std::uint32_t count;
 };
 
-/// Stable sort by key: least significant digit first, 16 bits a pass, passes whose digit is the
-/// same for every key skipped (a frame's voxels share the high bits).
-void SortByKey(std::vector<KeyedPoint>& items) {
-  std::vector<KeyedPoint> buffer(items.size());
-  std::vector<std::size_t> start(1 << 16);
-  for (int shift = 0; shift < 64; shift += 16) {
-    std::fill(start.begin(), start.end(), 0);
-    for (const KeyedPoint& k : items) ++start[(k.key >> shift) & 0xffff];
-    if (!items.empty() && start[(items.front().key >> shift) & 0xffff] == items.size()) continue;
-    std::size_t sum = 0;
-    for (std::size_t& s : start) sum += std::exchange(s, sum);
-    for (const KeyedPoint& k : items) buffer[start[(k.key >> shift) & 0xffff]++] = k;
-    items.swap(buffer);
+/// Voxels by key in first-seen order, found through an open-addressing table of indices.
+class VoxelSums {
+ public:
+  VoxelSum& Find(std::uint64_t key) {
+    if (2 * (voxels_.size() + 1) > slots_.size()) Grow();
+    std::size_t s = Slot(key);
+    for (; slots_[s] != kEmpty; s = (s + 1) & mask_) {
+      if (voxels_[slots_[s]].key == key) return voxels_[slots_[s]];
+    }
+    slots_[s] = static_cast<std::uint32_t>(voxels_.size());
+    voxels_.push_back({key, Eigen::Vector3d::Zero(), 0});
+    return voxels_.back();
   }
-}
+  std::vector<VoxelSum>& voxels() { return voxels_; }
+
+ private:
+  static constexpr std::uint32_t kEmpty = 0xffffffffu;
+  std::size_t Slot(std::uint64_t key) const {
+    return static_cast<std::size_t>((key * 0x9e3779b97f4a7c15ULL) >> 32) & mask_;
+  }
+  void Grow() {
+    slots_.assign(std::max<std::size_t>(1024, 2 * slots_.size()), kEmpty);
+    mask_ = slots_.size() - 1;
+    for (std::size_t k = 0; k < voxels_.size(); ++k) {
+      std::size_t s = Slot(voxels_[k].key);
+      while (slots_[s] != kEmpty) s = (s + 1) & mask_;
+      slots_[s] = static_cast<std::uint32_t>(k);
+    }
+  }
+  std::vector<VoxelSum> voxels_;
+  std::vector<std::uint32_t> slots_;
+  std::size_t mask_ = 0;
+};
 
 }  // namespace
 
 std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>& points,
                                              double voxel) {
   PLANESLAM_CHECK(voxel > 0, "voxel must be > 0, got " << voxel);
-  PLANESLAM_CHECK(points.size() <= 0xffffffffu, "too many points: " << points.size());
   // Voxel indices packed in 21 bits per axis (offset 2^20): +-2^20 voxels, e.g. +-52 km at 5 cm;
   // points beyond are dropped (no range image reaches that far).
   constexpr std::int64_t kHalf = std::int64_t{1} << 20;
-  std::vector<KeyedPoint> keyed;
-  keyed.reserve(points.size());
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    const Eigen::Vector3f& p = points[i];
+  // Each voxel's points are summed in input order, and the centroids come out in key order, so
+  // the result does not depend on how the voxels are found. Neighbouring points of a range image
+  // mostly share a voxel: the last one found is tried first.
+  VoxelSums sums;
+  VoxelSum* last = nullptr;
+  for (const Eigen::Vector3f& p : points) {
     if (!p.allFinite()) continue;
     std::uint64_t key = 0;
     bool inside = true;
@@ -76,21 +96,17 @@ std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>&
       }
       key = (key << 21) | static_cast<std::uint64_t>(static_cast<std::int64_t>(idx) + kHalf);
     }
-    if (inside) keyed.push_back({key, static_cast<std::uint32_t>(i)});
+    if (!inside) continue;
+    if (last == nullptr || last->key != key) last = &sums.Find(key);
+    last->sum += p.cast<double>();
+    ++last->count;
   }
-  // Sorted by voxel, each voxel's points in input order: the centroids are summed in that order.
-  SortByKey(keyed);
+  std::vector<VoxelSum>& voxels = sums.voxels();
+  std::sort(voxels.begin(), voxels.end(),
+            [](const VoxelSum& a, const VoxelSum& b) { return a.key < b.key; });
   std::vector<Eigen::Vector3f> out;
-  for (std::size_t begin = 0; begin < keyed.size();) {
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    int count = 0;
-    std::size_t end = begin;
-    for (; end < keyed.size() && keyed[end].key == keyed[begin].key; ++end, ++count) {
-      sum += points[keyed[end].index].cast<double>();
-    }
-    out.push_back((sum / count).cast<float>());
-    begin = end;
-  }
+  out.reserve(voxels.size());
+  for (const VoxelSum& v : voxels) out.push_back((v.sum / v.count).cast<float>());
   return out;
 }
 
@@ -276,8 +292,9 @@ void OccupancyMapBuilder::Insert(const std::vector<Eigen::Vector3f>& points_sens
 void OccupancyMapBuilder::InsertAll(const std::vector<const std::vector<Eigen::Vector3f>*>& scans,
                                     const std::vector<Pose>& poses, unsigned threads) {
   PLANESLAM_CHECK(scans.size() == poses.size(), "one pose per scan");
-  // While one scan is applied, the next `threads - 1` are ray-cast: every thread is busy, and at
-  // most `threads` scans' cell sets (tens of MB each for a LiDAR scan) are held at once.
+  // While one scan is applied, the next `threads` are ray-cast (a scan's ray casting takes about
+  // twice as long as applying it, so the applying thread mostly waits): every core is busy, and
+  // at most `threads + 1` scans' cell sets (tens of MB each for a LiDAR scan) are held at once.
   std::deque<std::future<ScanUpdate>> ahead;
   std::size_t next = 0;
   const auto launch = [&](std::launch policy) {
@@ -289,7 +306,9 @@ void OccupancyMapBuilder::InsertAll(const std::vector<const std::vector<Eigen::V
     if (ahead.empty()) launch(std::launch::deferred);  // nothing to overlap with: this thread
     const ScanUpdate update = ahead.front().get();
     ahead.pop_front();
-    while (next < scans.size() && ahead.size() + 1 < threads) launch(std::launch::async);
+    while (next < scans.size() && threads > 1 && ahead.size() < threads) {
+      launch(std::launch::async);
+    }
     // Applied as insertPointCloud does, free cells then occupied ones, but lazily: each cell is
     // updated at most once per scan, so the order within a scan does not matter, and the inner
     // nodes (maxima of their children) are brought up to date once (InnerNodesUpToDate) instead of

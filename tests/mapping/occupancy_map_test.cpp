@@ -4,9 +4,13 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <map>
+#include <random>
 
 #include "planeslam/datasets/errors.hpp"
 #include "test_support.hpp"
@@ -57,6 +61,47 @@ TEST(OccupancyMap, VoxelDownsampleKeepsOneCentroidPerVoxel) {
     EXPECT_NEAR(p.x(), cx, 0.0051);
   }
   EXPECT_THROW(VoxelDownsample(pts, 0.0), CheckError);
+}
+
+TEST(OccupancyMap, VoxelDownsampleMatchesAReferenceOnRandomClouds) {
+  // 30 clouds of scattered and clustered points on both sides of every axis, with invalid
+  // points: the centroids of the voxels in (x, y, z) voxel order, each summed in input order,
+  // bit for bit.
+  std::mt19937 rng(3);
+  for (int draw = 0; draw < 30; ++draw) {
+    std::uniform_real_distribution<float> spread(-3.0f + draw, 3.0f + 2.0f * draw);
+    std::normal_distribution<float> jitter(0.0f, 0.02f);
+    std::vector<Eigen::Vector3f> pts;
+    for (int i = 0; i < 4000; ++i) {
+      Eigen::Vector3f p;
+      for (int a = 0; a < 3; ++a) p(a) = spread(rng);
+      const int copies = 1 + i % 5;  // clusters: several points in a voxel
+      for (int c = 0; c < copies; ++c) {
+        Eigen::Vector3f q = p;
+        for (int a = 0; a < 3; ++a) q(a) += jitter(rng);
+        pts.push_back(q);
+      }
+      if (i % 97 == 0) pts.push_back(Eigen::Vector3f::Constant(std::nanf("")));
+    }
+    const double voxel = 0.05 + 0.01 * (draw % 7);
+    std::map<std::array<std::int64_t, 3>, std::pair<Eigen::Vector3d, int>> reference;
+    for (const Eigen::Vector3f& p : pts) {
+      if (!p.allFinite()) continue;
+      std::array<std::int64_t, 3> key;
+      for (int a = 0; a < 3; ++a) key[a] = static_cast<std::int64_t>(std::floor(p[a] / voxel));
+      auto& [sum, count] = reference.try_emplace(key, Eigen::Vector3d::Zero(), 0).first->second;
+      sum += p.cast<double>();
+      ++count;
+    }
+    const auto down = VoxelDownsample(pts, voxel);
+    ASSERT_EQ(down.size(), reference.size()) << "draw " << draw;
+    std::size_t k = 0;
+    for (const auto& [key, value] : reference) {
+      const Eigen::Vector3f expected = (value.first / value.second).cast<float>();
+      ASSERT_TRUE(down[k] == expected) << "draw " << draw << " voxel " << k;
+      ++k;
+    }
+  }
 }
 
 TEST(OccupancyMap, WallIsOccupiedFrontFreeBehindUnknownAndSurvivesTheFile) {
