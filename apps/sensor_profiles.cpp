@@ -150,6 +150,13 @@ fs::path FirstWithExtension(const fs::path& folder, const std::string& ext) {
   return files.empty() ? fs::path() : *std::min_element(files.begin(), files.end());
 }
 
+/// The folder holding the image's folder (the dataset folder of depth/NAME.png); "." for an image
+/// given as depth/NAME.png from inside the dataset folder.
+fs::path DatasetFolderOf(const fs::path& image) {
+  const fs::path folder = image.parent_path();
+  return folder.has_parent_path() ? folder.parent_path() : fs::path(".");
+}
+
 ProfileChoice RecognizeFolder(const fs::path& folder) {
   if (auto sim = RecognizeSimulation(folder)) return *sim;
   ds::SequenceLayout layout;
@@ -174,9 +181,9 @@ ProfileChoice RecognizeFolder(const fs::path& folder) {
 /// A depth PNG: the dataset folder it sits in (TUM's depth/ beside depth.txt, ICL's beside
 /// associations.txt); otherwise the one profile whose camera has the image's size, if only one.
 ProfileChoice RecognizePng(const fs::path& png) {
-  const fs::path dataset = png.parent_path().parent_path();
+  const fs::path dataset = DatasetFolderOf(png);
   std::error_code ec;
-  if (png.parent_path().filename() == "depth" && !dataset.empty()) {
+  if (png.parent_path().filename() == "depth") {
     if (fs::is_regular_file(dataset / "depth.txt", ec) ||
         fs::is_regular_file(dataset / "associations.txt", ec)) {
       ProfileChoice choice = RecognizeFolder(dataset);
@@ -288,7 +295,7 @@ std::string ResolveDepthCamera(const std::string& png, const std::string& intrin
   fs::path file = intrinsics_option;
   std::string source = intrinsics_option + " (--intrinsics)";
   std::error_code ec;
-  const fs::path dataset = path.parent_path().parent_path();
+  const fs::path dataset = DatasetFolderOf(path);
   if (file.empty() && fs::is_regular_file(path.parent_path() / "intrinsics.yaml", ec)) {
     file = path.parent_path() / "intrinsics.yaml";
     source = file.string() + " (beside the image)";

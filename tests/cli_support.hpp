@@ -23,11 +23,14 @@ inline std::string Slurp(const std::filesystem::path& path) {
   return ss.str();
 }
 
-/// Runs `planeslam ARGS` (a shell-quoted argument string) with stdin from /dev/null; `dir` holds
-/// the captured stdout/stderr files.
-inline CliResult RunCli(const std::string& args, const std::filesystem::path& dir) {
-  const std::filesystem::path out = dir / "cli_stdout.txt", err = dir / "cli_stderr.txt";
-  const std::string command = std::string(PLANESLAM_BIN) + " " + args + " </dev/null >" +
+/// Runs `planeslam ARGS` (a shell-quoted argument string) with stdin from /dev/null, in `cwd`
+/// when given; `dir` holds the captured stdout/stderr files.
+inline CliResult RunCli(const std::string& args, const std::filesystem::path& dir,
+                        const std::filesystem::path& cwd = {}) {
+  const std::filesystem::path out = std::filesystem::absolute(dir / "cli_stdout.txt"),
+                              err = std::filesystem::absolute(dir / "cli_stderr.txt");
+  const std::string command = (cwd.empty() ? "" : "cd '" + cwd.string() + "' && ") +
+                              std::string(PLANESLAM_BIN) + " " + args + " </dev/null >" +
                               out.string() + " 2>" + err.string();
   const int status = std::system(command.c_str());
   CliResult r;

@@ -107,6 +107,22 @@ TEST(SensorProfiles, SimulatedRoomGetsTheSimulatorsDetectionProfile) {
   EXPECT_EQ(r.out, PrintConfig("run " + room.string() + " --sensor none -c " +
                                    Config("detection_synthetic.yaml"),
                                dir));
+  // One of its depth images, named from inside the folder as from outside: the same profile and
+  // the folder's camera.
+  std::string image;
+  for (const auto& entry : fs::directory_iterator(room / "depth")) {
+    image = entry.path().filename().string();
+  }
+  ASSERT_FALSE(image.empty());
+  for (const auto& [png, cwd] : {std::pair{(room / "depth" / image).string(), fs::path()},
+                                 std::pair{"depth/" + image, room}}) {
+    const fs::path out = dir / ("det" + std::to_string(cwd.empty()));
+    const CliResult d = RunCli("detect " + png + " -q --out " + out.string(), dir, cwd);
+    ASSERT_EQ(d.exit_code, 0) << png << ": " << d.err;
+    EXPECT_NE(d.err.find("image of a dataset folder: planeslam simulate output"), std::string::npos)
+        << d.err;
+    EXPECT_NE(d.err.find("(the image's dataset folder)"), std::string::npos) << d.err;
+  }
 }
 
 TEST(SensorProfiles, KittiAndLaserFoldersGetTheirConfigs) {
