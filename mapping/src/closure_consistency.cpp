@@ -57,69 +57,95 @@ GraphPaths::GraphPaths(const PoseGraph& graph, std::size_t max_nodes)
   for (const PoseGraphEdge& edge : graph.edges()) AddEdge(edge);
 }
 
+int GraphPaths::Number(std::int64_t id) {
+  const auto [it, added] = number_.try_emplace(id, static_cast<int>(ids_.size()));
+  if (added) {
+    ids_.push_back(id);
+    links_.emplace_back();
+    stamp_.push_back(0);
+    distance_.push_back(0.0);
+    previous_.push_back(-1);
+    via_.push_back(nullptr);
+  }
+  return it->second;
+}
+
+int GraphPaths::Find(std::int64_t id) const {
+  const auto it = number_.find(id);
+  return it == number_.end() ? -1 : it->second;
+}
+
 void GraphPaths::AddEdge(const PoseGraphEdge& edge) {
   const UncertainPose forward{edge.T_a_b(), SymmetricInverse(edge.information)};
   const UncertainPose backward = Invert(forward);
-  links_[edge.from].push_back({edge.to, forward.covariance, forward.covariance.trace()});
-  links_[edge.to].push_back({edge.from, backward.covariance, backward.covariance.trace()});
+  const int from = Number(edge.from), to = Number(edge.to);
+  links_[from].push_back({to, forward.covariance, forward.covariance.trace()});
+  links_[to].push_back({from, backward.covariance, backward.covariance.trace()});
 }
 
 void GraphPaths::RemoveEdge(std::int64_t from, std::int64_t to) {
-  const auto erase_one = [&](std::int64_t a, std::int64_t b) {
-    std::vector<Link>& links = links_[a];
+  const auto erase_one = [&](int a, int b) {
+    if (a < 0 || b < 0) return;
+    std::vector<Link>& links = links_[static_cast<std::size_t>(a)];
     const auto it =
         std::find_if(links.begin(), links.end(), [&](const Link& l) { return l.to == b; });
     if (it != links.end()) links.erase(it);
   };
-  erase_one(from, to);
-  erase_one(to, from);
+  erase_one(Find(from), Find(to));
+  erase_one(Find(to), Find(from));
 }
 
 std::optional<UncertainPose> GraphPaths::Relative(std::int64_t from, std::int64_t to) {
   if (from == to) return UncertainPose{};
+  const int source = Find(from), target = Find(to);
+  if (source < 0 || target < 0) return std::nullopt;  // a node without edges reaches nothing
   // Dijkstra on the covariance trace; the path found is then composed with the current poses.
-  struct Reached {
-    double distance;
-    std::int64_t previous;
-    const Link* via;
+  if (++search_ == 0) {  // the stamps wrapped around
+    std::fill(stamp_.begin(), stamp_.end(), 0);
+    search_ = 1;
+  }
+  const auto reach = [&](int node, double distance, int previous, const Link* via) {
+    stamp_[node] = search_;
+    distance_[node] = distance;
+    previous_[node] = previous;
+    via_[node] = via;
   };
-  std::unordered_map<std::int64_t, Reached> reached;
-  using Entry = std::pair<double, std::int64_t>;
-  std::priority_queue<Entry, std::vector<Entry>, std::greater<>> queue;
-  reached[from] = {0.0, from, nullptr};
-  queue.push({0.0, from});
+  reach(source, 0.0, source, nullptr);
+  queue_.clear();
+  queue_.push_back({0.0, from, source});
+  const std::greater<Queued> later;
   std::size_t settled = 0;
   bool found = false;
-  while (!queue.empty() && settled < max_nodes_) {
-    const auto [distance, node] = queue.top();
-    queue.pop();
-    if (distance > reached[node].distance) continue;
-    if (node == to) {
+  while (!queue_.empty() && settled < max_nodes_) {
+    std::pop_heap(queue_.begin(), queue_.end(), later);
+    const Queued top = queue_.back();
+    queue_.pop_back();
+    if (top.distance > distance_[top.node]) continue;
+    if (top.node == target) {
       found = true;
       break;
     }
     ++settled;
-    const auto it = links_.find(node);
-    if (it == links_.end()) continue;
-    for (const Link& link : it->second) {
-      const double d = distance + link.weight;
-      const auto r = reached.find(link.to);
-      if (r == reached.end() || d < r->second.distance) {
-        reached[link.to] = {d, node, &link};
-        queue.push({d, link.to});
+    for (const Link& link : links_[top.node]) {
+      const double d = top.distance + link.weight;
+      if (stamp_[link.to] != search_ || d < distance_[link.to]) {
+        reach(link.to, d, top.node, &link);
+        queue_.push_back({d, ids_[link.to], link.to});
+        std::push_heap(queue_.begin(), queue_.end(), later);
       }
     }
   }
   if (!found) return std::nullopt;
-  std::vector<std::pair<std::int64_t, const Link*>> steps;  // (node the step starts at, link)
-  for (std::int64_t node = to; node != from; node = reached[node].previous) {
-    steps.emplace_back(reached[node].previous, reached[node].via);
+  std::vector<std::pair<int, const Link*>> steps;  // (node the step starts at, link)
+  for (int node = target; node != source; node = previous_[node]) {
+    steps.emplace_back(previous_[node], via_[node]);
   }
   std::reverse(steps.begin(), steps.end());
   UncertainPose path;
   for (const auto& [start, link] : steps) {
     UncertainPose step;
-    step.T = graph_.node(start).T_world_node().inverse() * graph_.node(link->to).T_world_node();
+    step.T = graph_.node(ids_[start]).T_world_node().inverse() *
+             graph_.node(ids_[link->to]).T_world_node();
     step.covariance = link->covariance;
     path = Compose(path, step);
   }

@@ -54,14 +54,35 @@ class GraphPaths {
   std::optional<UncertainPose> Relative(std::int64_t from, std::int64_t to);
 
  private:
+  /// The nodes are numbered densely in the order they first appear, so a search runs on arrays.
   struct Link {
-    std::int64_t to;
+    int to;               ///< dense number of the node
     Matrix6d covariance;  ///< of T_from_to, in `from`
     double weight;        ///< trace of the covariance
   };
+  struct Queued {
+    double distance;
+    std::int64_t id;  ///< ties are broken by node id
+    int node;
+    bool operator>(const Queued& o) const {
+      return distance > o.distance || (distance == o.distance && id > o.id);
+    }
+  };
+  int Number(std::int64_t id);  ///< the node's dense number, added when new
+  int Find(std::int64_t id) const;  ///< or -1
+
   const PoseGraph& graph_;
   std::size_t max_nodes_;
-  std::unordered_map<std::int64_t, std::vector<Link>> links_;
+  std::unordered_map<std::int64_t, int> number_;
+  std::vector<std::int64_t> ids_;
+  std::vector<std::vector<Link>> links_;
+  // One search's state, valid where stamp_ equals search_ (nothing is cleared between searches).
+  std::vector<std::uint32_t> stamp_;
+  std::vector<double> distance_;
+  std::vector<int> previous_;
+  std::vector<const Link*> via_;
+  std::vector<Queued> queue_;
+  std::uint32_t search_ = 0;
 };
 
 /// Nodes of the largest clique of an undirected graph given by its adjacency matrix (symmetric,
