@@ -4,9 +4,9 @@
 #include <cmath>
 #include <cstdint>
 #include <deque>
+#include <fstream>
 #include <functional>
 #include <future>
-#include <fstream>
 #include <utility>
 
 #include "planeslam/datasets/atomic_file.hpp"
@@ -274,9 +274,10 @@ ScanUpdate ComputeScanUpdate(const OccupancyMapConfig& config,
   }
   ScanUpdate update;
   update.free_cells = free_cells.TakeSorted();
-  update.free_cells.erase(std::remove_if(update.free_cells.begin(), update.free_cells.end(),
-                                         [&](std::uint64_t k) { return occupied_cells.Contains(k); }),
-                          update.free_cells.end());
+  update.free_cells.erase(
+      std::remove_if(update.free_cells.begin(), update.free_cells.end(),
+                     [&](std::uint64_t k) { return occupied_cells.Contains(k); }),
+      update.free_cells.end());
   update.occupied_cells = occupied_cells.TakeSorted();
   update.points = kept.size();
   return update;

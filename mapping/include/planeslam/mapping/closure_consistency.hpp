@@ -68,7 +68,7 @@ class GraphPaths {
       return distance > o.distance || (distance == o.distance && id > o.id);
     }
   };
-  int Number(std::int64_t id);  ///< the node's dense number, added when new
+  int Number(std::int64_t id);      ///< the node's dense number, added when new
   int Find(std::int64_t id) const;  ///< or -1
 
   const PoseGraph& graph_;
