@@ -104,11 +104,13 @@ TEST(RunCli, SigintWritesCompleteOutputsForFramesDone) {
       dup2(null_fd, STDIN_FILENO);
       dup2(null_fd, STDERR_FILENO);
     }
-    execl(PLANESLAM_BIN, PLANESLAM_BIN, "run", "-q", "--set", "run.max_frames=300", "--set",
+    // 15 laps of the room (5655 frames): a minute or more at any speed, so the interrupt below
+    // always lands in the middle of the run.
+    execl(PLANESLAM_BIN, PLANESLAM_BIN, "run", "-q", "--set", "simulation.laps=15", "--set",
           "octomap.enabled=false", "--out", out_arg.c_str(), static_cast<char*>(nullptr));
     _exit(127);
   }
-  // Long enough for the first frames on a loaded machine, far shorter than 300 frames.
+  // Long enough for the first frames on a loaded machine, far shorter than the run.
   std::this_thread::sleep_for(std::chrono::seconds(4));
   ASSERT_EQ(kill(pid, SIGINT), 0);
   int status = 0;
@@ -121,7 +123,7 @@ TEST(RunCli, SigintWritesCompleteOutputsForFramesDone) {
   EXPECT_TRUE(summary["interrupted"].get<bool>());
   const std::size_t frames = summary["frames"].get<std::size_t>();
   EXPECT_GT(frames, 0u);
-  EXPECT_LT(frames, 300u);
+  EXPECT_LT(frames, 5655u);
   ExpectCompleteOutputs(out, frames, /*octomap=*/false);
 }
 
