@@ -76,6 +76,12 @@ void FillFromExtents(const SlamConfig& config,
                      const detection::Segmentation& segmentation,
                      registration::RegistrationResult* reg) {
   if (!reg->converged || !reg->degenerate || reg->used_icp) return;
+  // Without a complete outline in the keyframe there is no pair: the frame's extents (a pass
+  // over its pixels) are not needed.
+  if (std::none_of(keyframe_extents.begin(), keyframe_extents.end(),
+                   [](const registration::PlaneExtent& e) { return e.complete; })) {
+    return;
+  }
   registration::FillDegenerateFromExtents(
       keyframe_planes, keyframe_extents, segmentation.planes,
       registration::ComputePlaneExtents(cloud, segmentation.labels, segmentation.planes,
