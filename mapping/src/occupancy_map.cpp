@@ -76,6 +76,7 @@ class VoxelSums {
 std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>& points,
                                              double voxel) {
   PLANESLAM_CHECK(voxel > 0, "voxel must be > 0, got " << voxel);
+  PLANESLAM_CHECK(points.size() < 0xffffffffu, "too many points: " << points.size());
   // Voxel indices packed in 21 bits per axis (offset 2^20): +-2^20 voxels, e.g. +-52 km at 5 cm;
   // points beyond are dropped (no range image reaches that far).
   constexpr std::int64_t kHalf = std::int64_t{1} << 20;
