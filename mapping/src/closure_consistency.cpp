@@ -62,10 +62,7 @@ int GraphPaths::Number(std::int64_t id) {
   if (added) {
     ids_.push_back(id);
     links_.emplace_back();
-    stamp_.push_back(0);
-    distance_.push_back(0.0);
-    previous_.push_back(-1);
-    via_.push_back(nullptr);
+    reached_.emplace_back();
   }
   return it->second;
 }
@@ -101,16 +98,10 @@ std::optional<UncertainPose> GraphPaths::Relative(std::int64_t from, std::int64_
   if (source < 0 || target < 0) return std::nullopt;  // a node without edges reaches nothing
   // Dijkstra on the covariance trace; the path found is then composed with the current poses.
   if (++search_ == 0) {  // the stamps wrapped around
-    std::fill(stamp_.begin(), stamp_.end(), 0);
+    for (Reached& r : reached_) r.stamp = 0;
     search_ = 1;
   }
-  const auto reach = [&](int node, double distance, int previous, const Link* via) {
-    stamp_[node] = search_;
-    distance_[node] = distance;
-    previous_[node] = previous;
-    via_[node] = via;
-  };
-  reach(source, 0.0, source, nullptr);
+  reached_[source] = {search_, 0.0, source, nullptr};
   queue_.clear();
   queue_.push_back({0.0, from, source});
   const std::greater<Queued> later;
@@ -120,7 +111,7 @@ std::optional<UncertainPose> GraphPaths::Relative(std::int64_t from, std::int64_
     std::pop_heap(queue_.begin(), queue_.end(), later);
     const Queued top = queue_.back();
     queue_.pop_back();
-    if (top.distance > distance_[top.node]) continue;
+    if (top.distance > reached_[top.node].distance) continue;
     if (top.node == target) {
       found = true;
       break;
@@ -128,8 +119,9 @@ std::optional<UncertainPose> GraphPaths::Relative(std::int64_t from, std::int64_
     ++settled;
     for (const Link& link : links_[top.node]) {
       const double d = top.distance + link.weight;
-      if (stamp_[link.to] != search_ || d < distance_[link.to]) {
-        reach(link.to, d, top.node, &link);
+      Reached& r = reached_[link.to];
+      if (r.stamp != search_ || d < r.distance) {
+        r = {search_, d, top.node, &link};
         queue_.push_back({d, ids_[link.to], link.to});
         std::push_heap(queue_.begin(), queue_.end(), later);
       }
@@ -137,8 +129,8 @@ std::optional<UncertainPose> GraphPaths::Relative(std::int64_t from, std::int64_
   }
   if (!found) return std::nullopt;
   std::vector<std::pair<int, const Link*>> steps;  // (node the step starts at, link)
-  for (int node = target; node != source; node = previous_[node]) {
-    steps.emplace_back(previous_[node], via_[node]);
+  for (int node = target; node != source; node = reached_[node].previous) {
+    steps.emplace_back(reached_[node].previous, reached_[node].via);
   }
   std::reverse(steps.begin(), steps.end());
   UncertainPose path;

@@ -7,10 +7,12 @@
 #include <fstream>
 #include <functional>
 #include <future>
+#include <limits>
 #include <utility>
 
 #include "planeslam/datasets/atomic_file.hpp"
 #include "planeslam/datasets/errors.hpp"
+#include "planeslam/registration/voxel_index.hpp"
 
 #ifdef PLANESLAM_HAVE_OCTOMAP
 #include <octomap/OcTree.h>
@@ -28,86 +30,53 @@ std::vector<std::string> OccupancyMapConfig::Validate() const {
   return problems;
 }
 
-namespace {
-
-/// The points of one voxel: key, sums and count.
-struct VoxelSum {
-  std::uint64_t key;
-  Eigen::Vector3d sum;
-  std::uint32_t count;
-};
-
-/// Voxels by key in first-seen order, found through an open-addressing table of indices.
-class VoxelSums {
- public:
-  VoxelSum& Find(std::uint64_t key) {
-    if (2 * (voxels_.size() + 1) > slots_.size()) Grow();
-    std::size_t s = Slot(key);
-    for (; slots_[s] != kEmpty; s = (s + 1) & mask_) {
-      if (voxels_[slots_[s]].key == key) return voxels_[slots_[s]];
-    }
-    slots_[s] = static_cast<std::uint32_t>(voxels_.size());
-    voxels_.push_back({key, Eigen::Vector3d::Zero(), 0});
-    return voxels_.back();
-  }
-  std::vector<VoxelSum>& voxels() { return voxels_; }
-
- private:
-  static constexpr std::uint32_t kEmpty = 0xffffffffu;
-  std::size_t Slot(std::uint64_t key) const {
-    return static_cast<std::size_t>((key * 0x9e3779b97f4a7c15ULL) >> 32) & mask_;
-  }
-  void Grow() {
-    slots_.assign(std::max<std::size_t>(1024, 2 * slots_.size()), kEmpty);
-    mask_ = slots_.size() - 1;
-    for (std::size_t k = 0; k < voxels_.size(); ++k) {
-      std::size_t s = Slot(voxels_[k].key);
-      while (slots_[s] != kEmpty) s = (s + 1) & mask_;
-      slots_[s] = static_cast<std::uint32_t>(k);
-    }
-  }
-  std::vector<VoxelSum> voxels_;
-  std::vector<std::uint32_t> slots_;
-  std::size_t mask_ = 0;
-};
-
-}  // namespace
-
 std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>& points,
                                              double voxel) {
   PLANESLAM_CHECK(voxel > 0, "voxel must be > 0, got " << voxel);
-  PLANESLAM_CHECK(points.size() < 0xffffffffu, "too many points: " << points.size());
-  // Voxel indices packed in 21 bits per axis (offset 2^20): +-2^20 voxels, e.g. +-52 km at 5 cm;
-  // points beyond are dropped (no range image reaches that far).
-  constexpr std::int64_t kHalf = std::int64_t{1} << 20;
-  // Each voxel's points are summed in input order, and the centroids come out in key order, so
-  // the result does not depend on how the voxels are found. Neighbouring points of a range image
-  // mostly share a voxel: the last one found is tried first.
-  VoxelSums sums;
-  VoxelSum* last = nullptr;
+  PLANESLAM_CHECK(points.size() <= static_cast<std::size_t>(std::numeric_limits<int>::max()),
+                  "too many points: " << points.size());
+  // Voxel indices within +-2^20 per axis, e.g. +-52 km at 5 cm; points beyond are dropped (no
+  // range image reaches that far).
+  constexpr double kHalf = 1 << 20;
+  // Each voxel's points are summed in input order, and the centroids come out in (x, y, z) voxel
+  // order, so the result does not depend on how the voxels are found. Neighbouring points of a
+  // range image mostly share a voxel: the last one found is tried first.
+  registration::VoxelIndex index;
+  std::vector<Eigen::Vector3i> keys;
+  std::vector<Eigen::Vector3d> sums;
+  std::vector<int> counts;
+  int last = -1;
   for (const Eigen::Vector3f& p : points) {
     if (!p.allFinite()) continue;
-    std::uint64_t key = 0;
+    Eigen::Vector3i key;
     bool inside = true;
-    for (int a = 0; a < 3; ++a) {
+    for (int a = 0; a < 3 && inside; ++a) {
       const double idx = std::floor(p[a] / voxel);
-      if (!(idx >= -kHalf && idx < kHalf)) {
-        inside = false;
-        break;
-      }
-      key = (key << 21) | static_cast<std::uint64_t>(static_cast<std::int64_t>(idx) + kHalf);
+      inside = idx >= -kHalf && idx < kHalf;
+      key[a] = inside ? static_cast<int>(idx) : 0;
     }
     if (!inside) continue;
-    if (last == nullptr || last->key != key) last = &sums.Find(key);
-    last->sum += p.cast<double>();
-    ++last->count;
+    if (last < 0 || keys[last] != key) {
+      bool inserted = false;
+      last = index.Insert(key, &inserted);
+      if (inserted) {
+        keys.push_back(key);
+        sums.push_back(Eigen::Vector3d::Zero());
+        counts.push_back(0);
+      }
+    }
+    sums[last] += p.cast<double>();
+    ++counts[last];
   }
-  std::vector<VoxelSum>& voxels = sums.voxels();
-  std::sort(voxels.begin(), voxels.end(),
-            [](const VoxelSum& a, const VoxelSum& b) { return a.key < b.key; });
+  std::vector<int> order(keys.size());
+  for (std::size_t k = 0; k < order.size(); ++k) order[k] = static_cast<int>(k);
+  std::sort(order.begin(), order.end(), [&](int a, int b) {
+    return std::lexicographical_compare(keys[a].data(), keys[a].data() + 3, keys[b].data(),
+                                        keys[b].data() + 3);
+  });
   std::vector<Eigen::Vector3f> out;
-  out.reserve(voxels.size());
-  for (const VoxelSum& v : voxels) out.push_back((v.sum / v.count).cast<float>());
+  out.reserve(order.size());
+  for (const int k : order) out.push_back((sums[k] / counts[k]).cast<float>());
   return out;
 }
 

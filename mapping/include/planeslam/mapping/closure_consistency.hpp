@@ -76,11 +76,15 @@ class GraphPaths {
   std::unordered_map<std::int64_t, int> number_;
   std::vector<std::int64_t> ids_;
   std::vector<std::vector<Link>> links_;
-  // One search's state, valid where stamp_ equals search_ (nothing is cleared between searches).
-  std::vector<std::uint32_t> stamp_;
-  std::vector<double> distance_;
-  std::vector<int> previous_;
-  std::vector<const Link*> via_;
+  /// One search's state of a node, valid while its stamp is the search's (nothing is cleared
+  /// between searches).
+  struct Reached {
+    std::uint32_t stamp = 0;
+    double distance = 0.0;
+    int previous = -1;
+    const Link* via = nullptr;
+  };
+  std::vector<Reached> reached_;
   std::vector<Queued> queue_;
   std::uint32_t search_ = 0;
 };
