@@ -32,7 +32,7 @@ void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
           "keep the last well-determined velocity on degenerate frames");
   v.Field("velocity_window", c.velocity_window,
           "[s] the predicted velocity is the mean of the well-determined motions of this last "
-          "span (0 = the last motion alone)",
+          "span, time the velocity was held not counted (0 = the last motion alone)",
           0.0, 1000.0);
   v.Field("continue_held_turn", c.continue_held_turn,
           "while the planes leave a rotation open, continue the turn along the trend of its "

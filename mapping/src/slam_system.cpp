@@ -216,6 +216,38 @@ void SlamSystem::AccumulateDrift(bool use_registration,
   drift_covariance_ += R * open * R.transpose();
 }
 
+void SlamSystem::UpdateVelocity(double timestamp, double dt, std::size_t since_keyframe,
+                                bool use_registration,
+                                const registration::RegistrationResult& reg,
+                                const Pose& T_keyframe_curr) {
+  // An update along directions the planes left open would feed the prior back into itself, so
+  // the velocity is held there. Translation and rotation are each held as a whole (an update of
+  // some of their directions only would mix a measured rate with a held one), but apart from each
+  // other: two walls leave a translation open but fix the rotation, whose rate then keeps
+  // following an accelerating turn.
+  bool translation_open = !use_registration, rotation_open = !use_registration;
+  if (use_registration && reg.used_icp) {  // the points determined some of them
+    translation_open = reg.prior_translations > 0;
+    rotation_open = reg.prior_directions > reg.prior_translations;
+  } else {
+    for (const registration::Vector6d& direction : reg.degenerate_directions) {
+      (direction.head<3>().squaredNorm() > 0.5 ? translation_open : rotation_open) = true;
+    }
+  }
+  const bool hold = config_.hold_velocity_when_degenerate;
+  // The prior's drift since a part was last measured, or since the keyframe the poses are
+  // relative to, is spread over those frames (registration/velocity_model.hpp).
+  const std::size_t frame = frames_.size();
+  const auto span = [&](std::size_t measured_at) {
+    return static_cast<int>(std::min(frame - measured_at, since_keyframe));
+  };
+  velocity_.Add(timestamp, dt, T_keyframe_last_.inverse() * T_keyframe_curr,
+                !(hold && translation_open), !(hold && rotation_open),
+                span(translation_measured_at_), span(rotation_measured_at_));
+  if (!(hold && translation_open)) translation_measured_at_ = frame;
+  if (!(hold && rotation_open)) rotation_measured_at_ = frame;
+}
+
 SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::OrganizedCloud& cloud,
                                        const detection::Segmentation& segmentation) {
   SlamFrameResult result;
@@ -308,23 +340,8 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
   if (result.constrained_by.find("prior") != std::string::npos) ++stats_.prior_frames;
   if (result.degenerate) ++stats_.degenerate_frames;
 
-  // An update along directions the planes left open would feed the prior back into itself, so
-  // the velocity is held there. Translation and rotation are each held as a whole (an update of
-  // some of their directions only would mix a measured rate with a held one), but apart from each
-  // other: two walls leave a translation open but fix the rotation, whose rate then keeps
-  // following an accelerating turn.
-  bool translation_open = !use_registration, rotation_open = !use_registration;
-  if (use_registration && reg.used_icp) {  // the points determined some of them
-    translation_open = reg.prior_translations > 0;
-    rotation_open = reg.prior_directions > reg.prior_translations;
-  } else {
-    for (const registration::Vector6d& direction : reg.degenerate_directions) {
-      (direction.head<3>().squaredNorm() > 0.5 ? translation_open : rotation_open) = true;
-    }
-  }
-  const bool hold = config_.hold_velocity_when_degenerate;
-  velocity_.Add(timestamp, dt, T_keyframe_last_.inverse() * T_keyframe_curr,
-                !(hold && translation_open), !(hold && rotation_open));
+  UpdateVelocity(timestamp, dt, result.index - keyframe.frame, use_registration, reg,
+                 T_keyframe_curr);
   T_keyframe_last_ = T_keyframe_curr;
   covariance_keyframe_last_ = covariance;
   result.T_world_sensor = KeyframePose(keyframe.id) * T_keyframe_curr;

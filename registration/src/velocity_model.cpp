@@ -2,20 +2,36 @@
 
 namespace planeslam::registration {
 
-void VelocityModel::AddTo(std::deque<Motion>& motions, double timestamp, double dt,
-                          const Eigen::Vector3d& delta) {
-  motions.push_back({timestamp, dt, delta});
-  while (motions.size() > 1 && motions.front().timestamp < timestamp - window_) {
+void VelocityModel::AddTo(std::deque<Motion>& motions, double* held_time, double timestamp,
+                          double dt, const Eigen::Vector3d& delta, int span) {
+  Eigen::Vector3d motion = delta;
+  if (span > 1 && !motions.empty()) {
+    const Eigen::Vector3d held = Rate(motions, dt);
+    motion = held + (delta - held) / span;
+  }
+  if (!motions.empty()) {
+    // Frames between the last motion and this one were held.
+    const double gap = (timestamp - dt) - motions.back().timestamp;
+    if (gap > 0.5 * dt) *held_time += gap;
+  }
+  const double measured_time = timestamp - *held_time;
+  motions.push_back({timestamp, dt, motion, measured_time});
+  while (motions.size() > 1 && motions.front().measured_time < measured_time - window_) {
     motions.pop_front();
   }
 }
 
 void VelocityModel::Add(double timestamp, double dt, const Pose& T_prev_curr,
-                        bool translation_known, bool rotation_known) {
+                        bool translation_known, bool rotation_known, int translation_span,
+                        int rotation_span) {
   if (!(dt > 0)) return;
   const Vector6d delta = BoxMinus(T_prev_curr, Pose::Identity());
-  if (translation_known) AddTo(translation_, timestamp, dt, delta.head<3>());
-  if (rotation_known) AddTo(rotation_, timestamp, dt, delta.tail<3>());
+  if (translation_known) {
+    AddTo(translation_, &translation_held_, timestamp, dt, delta.head<3>(), translation_span);
+  }
+  if (rotation_known) {
+    AddTo(rotation_, &rotation_held_, timestamp, dt, delta.tail<3>(), rotation_span);
+  }
 }
 
 Eigen::Vector3d VelocityModel::Rate(const std::deque<Motion>& motions, double dt) {

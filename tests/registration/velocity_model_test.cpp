@@ -1,5 +1,6 @@
-// Constant-velocity prediction from recent motions: mean rate over a time window, scaled to the
-// next interval, forgetting what is older than the window; translation and rotation kept apart.
+// Constant-velocity prediction from recent motions: mean rate over a window of measured time,
+// scaled to the next interval, forgetting what is older than the window; translation and rotation
+// kept apart; a held part's drift correction spread over the frames it accumulated in.
 #include "planeslam/registration/velocity_model.hpp"
 
 #include <gtest/gtest.h>
@@ -68,10 +69,45 @@ TEST(VelocityModel, AnUntrustedPartKeepsItsOwnRateWhileTheOtherFollows) {
   const Pose predicted = model.Predict(0.1);
   EXPECT_NEAR(predicted.translation().x(), 0.01, 1e-12);
   EXPECT_NEAR(LogSO3(predicted.linear()).z(), 0.006, 1e-12);
-  // And the other way round.
+  // And the other way round. The window runs over measured time, so the first translation after
+  // the held 0.3 s is averaged with the last measured ones (those of 0.9 and 1.0 s).
   model.Add(1.4, 0.1, Motion(0.02, 0.5), /*translation_known=*/true, /*rotation_known=*/false);
-  EXPECT_NEAR(model.Predict(0.1).translation().x(), 0.02, 1e-12);
+  EXPECT_NEAR(model.Predict(0.1).translation().x(), (0.01 + 0.01 + 0.02) / 3, 1e-12);
   EXPECT_NEAR(LogSO3(model.Predict(0.1).linear()).z(), 0.006, 1e-12);
+}
+
+TEST(VelocityModel, ADriftCorrectionIsSpreadOverTheFramesItAccumulatedIn) {
+  // 1 cm a frame, then ten frames whose translation the prior held at 1 cm while the sensor
+  // moved 1.2 cm: the first measured frame moves 1.2 cm plus the 2 cm the prior fell behind.
+  // Taken as one frame's rate that is 3.2 cm; spread over the eleven frames it is 1.2 cm.
+  for (const int span : {1, 11}) {
+    VelocityModel model(0.0);  // the latest motion alone
+    for (int i = 1; i <= 10; ++i) model.Add(0.033 * i, 0.033, Motion(0.01, 0.0));
+    for (int i = 11; i <= 20; ++i) {
+      model.Add(0.033 * i, 0.033, Motion(0.01, 0.0), /*translation_known=*/false);
+    }
+    model.Add(0.033 * 21, 0.033, Motion(0.032, 0.0), true, true, span);
+    EXPECT_NEAR(model.Predict(0.033).translation().x(), span == 1 ? 0.032 : 0.012, 1e-12);
+  }
+  // Without a rate to hold, the motion is taken as it is.
+  VelocityModel fresh(0.25);
+  fresh.Add(0.033, 0.033, Motion(0.02, 0.0), true, true, 5);
+  EXPECT_NEAR(fresh.Predict(0.033).translation().x(), 0.02, 1e-12);
+}
+
+TEST(VelocityModel, AHeldStretchDoesNotEmptyTheWindow) {
+  // Frames every 0.1 s: five of 1 cm, five held, then one wrong by 5 cm. Held time does not
+  // count, so the 0.25 s window still holds the motions ending at 0.4 and 0.5 s, and the wrong
+  // one is averaged with them rather than becoming the velocity.
+  VelocityModel model(0.25);
+  for (int i = 1; i <= 5; ++i) model.Add(0.1 * i, 0.1, Motion(0.01, 0.0));
+  for (int i = 6; i <= 10; ++i) {
+    model.Add(0.1 * i, 0.1, Motion(0.01, 0.0), /*translation_known=*/false);
+  }
+  model.Add(1.1, 0.1, Motion(0.06, 0.0));
+  EXPECT_NEAR(model.Predict(0.1).translation().x(), (0.01 + 0.01 + 0.06) / 3, 1e-12);
+  // The rotation, measured throughout, keeps the ordinary window.
+  EXPECT_NEAR(LogSO3(model.Predict(0.1).linear()).z(), 0.0, 1e-12);
 }
 
 TEST(VelocityModel, AHeldTurnContinuesAlongItsTrend) {

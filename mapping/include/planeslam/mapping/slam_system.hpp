@@ -394,6 +394,11 @@ class SlamSystem {
   /// drift_covariance_ (directions in the keyframe's tangent, rotated into the world).
   void AccumulateDrift(bool use_registration, const registration::RegistrationResult& reg,
                        const Eigen::Matrix3d& R_world_keyframe);
+  /// Adds the frame's motion since the previous one (T_keyframe_last_ to T_keyframe_curr) to the
+  /// velocity, holding the parts the prior supplied; `since_keyframe` frames since the keyframe.
+  void UpdateVelocity(double timestamp, double dt, std::size_t since_keyframe,
+                      bool use_registration, const registration::RegistrationResult& reg,
+                      const Pose& T_keyframe_curr);
   /// Depth images: fuses the frame into the depth map (created with the first frame).
   void UpdateDepthMap(const datasets::OrganizedCloud& cloud,
                       const std::vector<std::int32_t>& labels, const Pose& T_world_sensor);
@@ -436,6 +441,8 @@ class SlamSystem {
   Pose T_keyframe_last_ = Pose::Identity();
   Matrix6d covariance_keyframe_last_ = Matrix6d::Zero();  ///< of T_keyframe_last_
   int consecutive_refusals_ = 0;
+  /// The last frames whose translation and rotation the velocity took (not held).
+  std::size_t translation_measured_at_ = 0, rotation_measured_at_ = 0;
   SlamStats stats_;
   std::vector<LoopClosureRecord> closures_;
   std::vector<std::size_t> pending_;  ///< indices into closures_ awaiting a decision
