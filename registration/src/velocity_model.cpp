@@ -1,6 +1,22 @@
 #include "planeslam/registration/velocity_model.hpp"
 
+#include <algorithm>
+#include <vector>
+
 namespace planeslam::registration {
+
+namespace {
+
+/// Median of a non-empty list (reorders it).
+double Median(std::vector<double>* values) {
+  const std::size_t k = values->size() / 2;
+  std::nth_element(values->begin(), values->begin() + k, values->end());
+  const double upper = (*values)[k];
+  if (values->size() % 2 == 1) return upper;
+  return 0.5 * (upper + *std::max_element(values->begin(), values->begin() + k));
+}
+
+}  // namespace
 
 void VelocityModel::AddTo(std::deque<Motion>& motions, double* held_time, double timestamp,
                           double dt, const Eigen::Vector3d& delta, int span) {
@@ -50,21 +66,31 @@ Eigen::Vector3d VelocityModel::TrendRate(const std::deque<Motion>& motions, doub
   if (motions.size() < 4) return Rate(motions, dt);
   // Each motion's rate belongs to the middle of its interval; times relative to the latest end.
   const double t_latest = motions.back().timestamp;
-  double n = 0.0, st = 0.0, stt = 0.0;
-  Eigen::Vector3d sr = Eigen::Vector3d::Zero(), str = Eigen::Vector3d::Zero();
+  std::vector<double> t;
+  std::vector<Eigen::Vector3d> rate;
   for (const Motion& m : motions) {
-    const double t = m.timestamp - 0.5 * m.dt - t_latest;
-    const Eigen::Vector3d rate = m.delta / m.dt;
-    n += 1.0;
-    st += t;
-    stt += t * t;
-    sr += rate;
-    str += t * rate;
+    t.push_back(m.timestamp - 0.5 * m.dt - t_latest);
+    rate.push_back(m.delta / m.dt);
   }
-  const double spread = stt - st * st / n;
-  if (!(spread > 0.0)) return Rate(motions, dt);
-  const Eigen::Vector3d slope = (str - sr * (st / n)) / spread;
-  return (sr / n + slope * (at - st / n)) * dt;
+  // Theil-Sen line per axis (median of the pairwise slopes, then of the intercepts): one wrong
+  // motion at the end of the window, where a least-squares line has the most leverage, does
+  // not set the trend that the held turn is continued along.
+  Eigen::Vector3d result;
+  std::vector<double> values;
+  for (int axis = 0; axis < 3; ++axis) {
+    values.clear();
+    for (std::size_t i = 0; i < t.size(); ++i) {
+      for (std::size_t j = i + 1; j < t.size(); ++j) {
+        if (t[j] - t[i] > 1e-9) values.push_back((rate[j](axis) - rate[i](axis)) / (t[j] - t[i]));
+      }
+    }
+    if (values.empty()) return Rate(motions, dt);
+    const double slope = Median(&values);
+    values.clear();
+    for (std::size_t i = 0; i < t.size(); ++i) values.push_back(rate[i](axis) - slope * t[i]);
+    result(axis) = (Median(&values) + slope * at) * dt;
+  }
+  return result;
 }
 
 Pose VelocityModel::PredictContinuingHeldTurn(double dt, double timestamp) const {

@@ -138,5 +138,21 @@ TEST(VelocityModel, AHeldTurnContinuesAlongItsTrend) {
   EXPECT_TRUE(model.PredictContinuingHeldTurn(0.1, 1.4).isApprox(model.Predict(0.1), 1e-15));
 }
 
+TEST(VelocityModel, AHeldTurnIsNotBentByOneWrongMotion) {
+  // A yaw rate growing by 1 rad/s per second, then one motion wrong by 0.05 rad (a plane
+  // matched wrongly) just before the rotation is held. The continued turn keeps the trend of the
+  // other motions; a least-squares line would take a slope from the outlier at its end.
+  auto rate = [](double t) { return 0.2 + 1.0 * t; };
+  VelocityModel model(0.45);
+  for (int i = 1; i <= 9; ++i) {
+    const double t = 0.1 * i;
+    model.Add(t, 0.1, Motion(0.01, 0.1 * rate(t - 0.05)));
+  }
+  model.Add(1.0, 0.1, Motion(0.01, 0.1 * rate(0.95) + 0.05));
+  model.Add(1.1, 0.1, Motion(0.01, 0.0), /*translation_known=*/true, /*rotation_known=*/false);
+  EXPECT_NEAR(LogSO3(model.PredictContinuingHeldTurn(0.1, 1.2).linear()).z(), 0.1 * rate(1.15),
+              1e-12);
+}
+
 }  // namespace
 }  // namespace planeslam::registration

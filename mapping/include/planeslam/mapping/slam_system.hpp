@@ -81,7 +81,7 @@ struct SlamConfig {
   /// frame's error then does not become the velocity held through a degenerate stretch [s].
   double velocity_window = 0.5;
   /// While the rotation rate is held (the planes leave a rotation open), continue it along the
-  /// least-squares trend of its window (constant angular acceleration) instead of its mean,
+  /// Theil-Sen trend of its window (constant angular acceleration) instead of its mean,
   /// which lags a turn that speeds up by a quarter second: one blank wall in view while the
   /// camera turns. Only held rotations follow the trend: on every frame it would add drift where
   /// the planes determine the rotation anyway.

@@ -29,7 +29,7 @@ class VelocityModel {
   /// motions or for dt <= 0).
   Pose Predict(double dt) const;
   /// The same for the frame at `timestamp`, with the rotation rate continued along the trend of
-  /// its window (least-squares line, constant angular acceleration) while it is being held, i.e.
+  /// its window (Theil-Sen line, constant angular acceleration) while it is being held, i.e.
   /// its latest motion ended before the previous frame; at most `window` beyond that motion.
   Pose PredictContinuingHeldTurn(double dt, double timestamp) const;
   bool empty() const { return translation_.empty() && rotation_.empty(); }
@@ -53,7 +53,7 @@ class VelocityModel {
              const Eigen::Vector3d& delta, int span);
   /// Mean rate of one part's window times dt (zero without motions).
   static Eigen::Vector3d Rate(const std::deque<Motion>& motions, double dt);
-  /// The rate of the least-squares line through the window's rates at time `at` (relative to the
+  /// The rate of the Theil-Sen line through the window's rates at time `at` (relative to the
   /// latest motion's end), times dt; the mean rate with fewer than 4 motions.
   static Eigen::Vector3d TrendRate(const std::deque<Motion>& motions, double at, double dt);
   double window_;
