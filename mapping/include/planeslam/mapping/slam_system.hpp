@@ -90,9 +90,8 @@ struct SlamConfig {
   /// default: its corrections on walls seen at a slant are biased.
   bool point_to_plane_fill = false;
   /// Depth images: fill directions the planes leave open by aligning the pixels outside the
-  /// planes to a fused depth map of recent frames (registration/depth_local_map.hpp). Off by
-  /// default: it makes the two-lap synthetic room's largest error worse (docs/RESULTS.md).
-  bool depth_map_fill = false;
+  /// planes to a fused depth map of recent frames (registration/depth_local_map.hpp).
+  bool depth_map_fill = true;
   registration::DepthMapConfig depth_map;  ///< its settings (the noise model is the sensor's)
   /// Re-acquisition: once the uncertainty the prior accumulated along directions the planes left
   /// open exceeds this (1-sigma, world translation) [m], each new keyframe's planes are
