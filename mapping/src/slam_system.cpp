@@ -216,7 +216,7 @@ void SlamSystem::AccumulateDrift(bool use_registration,
   drift_covariance_ += R * open * R.transpose();
 }
 
-void SlamSystem::UpdateVelocity(double timestamp, double dt, std::size_t since_keyframe,
+void SlamSystem::UpdateVelocity(double timestamp, double dt, std::size_t keyframe_frame,
                                 bool use_registration,
                                 const registration::RegistrationResult& reg,
                                 const Pose& T_keyframe_curr) {
@@ -237,9 +237,9 @@ void SlamSystem::UpdateVelocity(double timestamp, double dt, std::size_t since_k
   const bool hold = config_.hold_velocity_when_degenerate;
   // The prior's drift since a part was last measured, or since the keyframe the poses are
   // relative to, is spread over those frames (registration/velocity_model.hpp).
-  const std::size_t frame = frames_.size();
+  const std::size_t frame = frames_.size();  // this frame's index
   const auto span = [&](std::size_t measured_at) {
-    return static_cast<int>(std::min(frame - measured_at, since_keyframe));
+    return static_cast<int>(frame - std::max(measured_at, keyframe_frame));
   };
   velocity_.Add(timestamp, dt, T_keyframe_last_.inverse() * T_keyframe_curr,
                 !(hold && translation_open), !(hold && rotation_open),
@@ -340,8 +340,7 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
   if (result.constrained_by.find("prior") != std::string::npos) ++stats_.prior_frames;
   if (result.degenerate) ++stats_.degenerate_frames;
 
-  UpdateVelocity(timestamp, dt, result.index - keyframe.frame, use_registration, reg,
-                 T_keyframe_curr);
+  UpdateVelocity(timestamp, dt, keyframe.frame, use_registration, reg, T_keyframe_curr);
   T_keyframe_last_ = T_keyframe_curr;
   covariance_keyframe_last_ = covariance;
   result.T_world_sensor = KeyframePose(keyframe.id) * T_keyframe_curr;

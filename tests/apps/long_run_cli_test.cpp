@@ -27,6 +27,16 @@ nlohmann::json RunAndSummarise(const std::string& args, const fs::path& dir) {
   return nlohmann::json::parse(Slurp(out / "summary.json"));
 }
 
+/// The run's trajectory_tum.txt against `truth`, SE(3)-aligned on the first 300 pairs.
+datasets::ApeResult ApeAlignedOnFirst300(const datasets::Trajectory& truth, const fs::path& out) {
+  const datasets::Trajectory estimate =
+      datasets::ReadTumTrajectory((out / "trajectory_tum.txt").string());
+  datasets::ApeOptions options;
+  options.alignment.align = true;
+  options.alignment.n_to_align = 300;
+  return datasets::EvaluateApe(truth, estimate, options);
+}
+
 std::size_t CountLines(const std::string& text) {
   std::size_t n = 0;
   for (char c : text) n += c == '\n';
@@ -74,14 +84,8 @@ TEST(LongRunCli, OtherNoiseSeedsStayOnTheTruth) {
     const fs::path dir = ScratchDir() / std::to_string(seed);
     fs::create_directories(dir);
     RunAndSummarise("--set run.max_frames=430 --set simulation.seed=" + std::to_string(seed), dir);
-    const datasets::Trajectory truth =
-        datasets::ReadTumTrajectory((dir / "out" / "ground_truth_tum.txt").string());
-    const datasets::Trajectory estimate =
-        datasets::ReadTumTrajectory((dir / "out" / "trajectory_tum.txt").string());
-    datasets::ApeOptions options;
-    options.alignment.align = true;
-    options.alignment.n_to_align = 300;
-    const datasets::ApeResult ape = datasets::EvaluateApe(truth, estimate, options);
+    const datasets::ApeResult ape = ApeAlignedOnFirst300(
+        datasets::ReadTumTrajectory((dir / "out" / "ground_truth_tum.txt").string()), dir / "out");
     ASSERT_TRUE(ape.ok) << ape.message;
     EXPECT_EQ(ape.stats.count, 430u);
     EXPECT_LT(ape.stats.max, 0.05);
@@ -114,13 +118,8 @@ TEST(LongRunCli, TwoLapsStayInOnePiece) {
   // its curved objects, seldom detected where keyframes looked at them, are culled).
   EXPECT_GT(summary["back_end"]["map_planes_culled"].get<int>(), 0);
   EXPECT_LE(summary["map_planes"].get<std::size_t>(), sequence.scene().planes.size());
-  const datasets::Trajectory truth = sequence.GroundTruthTrajectory();
-  const datasets::Trajectory estimate =
-      datasets::ReadTumTrajectory((dir / "out" / "trajectory_tum.txt").string());
-  datasets::ApeOptions options;
-  options.alignment.align = true;
-  options.alignment.n_to_align = 300;
-  const datasets::ApeResult ape = datasets::EvaluateApe(truth, estimate, options);
+  const datasets::ApeResult ape =
+      ApeAlignedOnFirst300(sequence.GroundTruthTrajectory(), dir / "out");
   ASSERT_TRUE(ape.ok) << ape.message;
   EXPECT_LT(ape.stats.max, 0.05);
 }

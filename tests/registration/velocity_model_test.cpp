@@ -15,6 +15,13 @@ Pose Motion(double tx, double yaw) {
   return T;
 }
 
+/// Frames first..last, one every `dt` seconds, each moving by `motion`; with
+/// translation_known = false, frames whose translation the prior held.
+void AddFrames(VelocityModel* model, int first, int last, double dt, const Pose& motion,
+               bool translation_known = true) {
+  for (int i = first; i <= last; ++i) model->Add(dt * i, dt, motion, translation_known);
+}
+
 TEST(VelocityModel, WithoutMotionsOrIntervalPredictsNoMotion) {
   VelocityModel model(0.5);
   EXPECT_TRUE(model.Predict(0.033).isApprox(Pose::Identity()));
@@ -59,13 +66,11 @@ TEST(VelocityModel, MotionsOlderThanTheWindowAreForgotten) {
 
 TEST(VelocityModel, AnUntrustedPartKeepsItsOwnRateWhileTheOtherFollows) {
   VelocityModel model(0.25);
-  for (int i = 1; i <= 10; ++i) model.Add(0.1 * i, 0.1, Motion(0.01, 0.002));
+  AddFrames(&model, 1, 10, 0.1, Motion(0.01, 0.002));
   // The turn speeds up while the translation is left to the prior (e.g. two walls only): the
   // rotation follows, the translation keeps its last trusted rate, and even beyond the window
   // (its motions ended 0.3 s before the latest) is not forgotten.
-  for (int i = 11; i <= 13; ++i) {
-    model.Add(0.1 * i, 0.1, Motion(0.05, 0.006), /*translation_known=*/false);
-  }
+  AddFrames(&model, 11, 13, 0.1, Motion(0.05, 0.006), /*translation_known=*/false);
   const Pose predicted = model.Predict(0.1);
   EXPECT_NEAR(predicted.translation().x(), 0.01, 1e-12);
   EXPECT_NEAR(LogSO3(predicted.linear()).z(), 0.006, 1e-12);
@@ -82,10 +87,8 @@ TEST(VelocityModel, ADriftCorrectionIsSpreadOverTheFramesItAccumulatedIn) {
   // Taken as one frame's rate that is 3.2 cm; spread over the eleven frames it is 1.2 cm.
   for (const int span : {1, 11}) {
     VelocityModel model(0.0);  // the latest motion alone
-    for (int i = 1; i <= 10; ++i) model.Add(0.033 * i, 0.033, Motion(0.01, 0.0));
-    for (int i = 11; i <= 20; ++i) {
-      model.Add(0.033 * i, 0.033, Motion(0.01, 0.0), /*translation_known=*/false);
-    }
+    AddFrames(&model, 1, 10, 0.033, Motion(0.01, 0.0));
+    AddFrames(&model, 11, 20, 0.033, Motion(0.01, 0.0), /*translation_known=*/false);
     model.Add(0.033 * 21, 0.033, Motion(0.032, 0.0), true, true, span);
     EXPECT_NEAR(model.Predict(0.033).translation().x(), span == 1 ? 0.032 : 0.012, 1e-12);
   }
@@ -100,10 +103,8 @@ TEST(VelocityModel, AHeldStretchDoesNotEmptyTheWindow) {
   // count, so the 0.25 s window still holds the motions ending at 0.4 and 0.5 s, and the wrong
   // one is averaged with them rather than becoming the velocity.
   VelocityModel model(0.25);
-  for (int i = 1; i <= 5; ++i) model.Add(0.1 * i, 0.1, Motion(0.01, 0.0));
-  for (int i = 6; i <= 10; ++i) {
-    model.Add(0.1 * i, 0.1, Motion(0.01, 0.0), /*translation_known=*/false);
-  }
+  AddFrames(&model, 1, 5, 0.1, Motion(0.01, 0.0));
+  AddFrames(&model, 6, 10, 0.1, Motion(0.01, 0.0), /*translation_known=*/false);
   model.Add(1.1, 0.1, Motion(0.06, 0.0));
   EXPECT_NEAR(model.Predict(0.1).translation().x(), (0.01 + 0.01 + 0.06) / 3, 1e-12);
   // The rotation, measured throughout, keeps the ordinary window.

@@ -394,8 +394,8 @@ class SlamSystem {
   void AccumulateDrift(bool use_registration, const registration::RegistrationResult& reg,
                        const Eigen::Matrix3d& R_world_keyframe);
   /// Adds the frame's motion since the previous one (T_keyframe_last_ to T_keyframe_curr) to the
-  /// velocity, holding the parts the prior supplied; `since_keyframe` frames since the keyframe.
-  void UpdateVelocity(double timestamp, double dt, std::size_t since_keyframe,
+  /// velocity, holding the parts the prior supplied; `keyframe_frame` is the keyframe's frame.
+  void UpdateVelocity(double timestamp, double dt, std::size_t keyframe_frame,
                       bool use_registration, const registration::RegistrationResult& reg,
                       const Pose& T_keyframe_curr);
   /// Depth images: fuses the frame into the depth map (created with the first frame).
