@@ -27,6 +27,21 @@ constexpr double kRangeFactor = 1.25;
 /// kMinLooks looks: ORB-SLAM's criterion for map points (found / visible < 0.25).
 constexpr double kMinDetectedShare = 0.25;
 constexpr int kMinLooks = 5;
+/// A keyframe this close to one that detected a plane saw nearly the same image of it, and so
+/// looked at it whatever the plane's normal says: a plane fitted across clutter has an arbitrary
+/// normal, which the facing test would take at its word. Applied to planes detected fewer than
+/// kMinLooks times, which the sight test alone could never judge.
+constexpr double kSameViewTranslation = 0.10;  // [m]
+constexpr double kSameViewAngleDeg = 5.0;
+
+/// Whether the keyframe at pose `a` saw what the one at `b` saw: nearly the same viewpoint.
+bool SameView(const Pose& a, const Pose& b) {
+  const Pose d = a.inverse() * b;
+  const double cos_angle = std::cos(kSameViewAngleDeg * M_PI / 180.0);
+  // The rotation angle theta of d: trace = 1 + 2 cos(theta).
+  return d.translation().norm() <= kSameViewTranslation &&
+         d.linear().trace() >= 1.0 + 2.0 * cos_angle;
+}
 
 }  // namespace
 
@@ -54,15 +69,30 @@ int SlamSystem::CullUnconfirmedPlanes() {
         confirmed.insert(obs.keyframe_id);
       }
     }
-    const std::vector<Eigen::Vector3d> all = map_.WorldSamples(plane);
+    std::vector<Eigen::Vector3d> all = map_.WorldSamples(plane);
+    // An observation keeps only the samples that extended its plane; one split off later (a merge
+    // the final poses contradict) may have none. Its centroid is then where it was seen.
+    if (all.empty()) {
+      for (const PlaneObservation& obs : plane.observations) {
+        all.push_back(KeyframePose(obs.keyframe_id) * obs.stats_sensor.centroid);
+      }
+    }
     std::vector<Eigen::Vector3d> samples;
     const std::size_t step = std::max<std::size_t>(1, all.size() / kCullSamples);
     for (std::size_t i = 0; i < all.size(); i += step) samples.push_back(all[i]);
     if (samples.empty()) continue;
     int looks = static_cast<int>(detected.size());
     for (const Keyframe& keyframe : keyframes_) {
-      if (detected.count(keyframe.id) > 0 || keyframe.view.empty()) continue;
+      if (detected.count(keyframe.id) > 0) continue;
       const Pose& T = T_sensor_world[static_cast<std::size_t>(keyframe.id)];
+      if (detected.size() < static_cast<std::size_t>(kMinLooks) &&
+          std::any_of(detected.begin(), detected.end(), [&](std::int64_t id) {
+            return SameView(T, T_sensor_world[static_cast<std::size_t>(id)]);
+          })) {
+        ++looks;
+        continue;
+      }
+      if (keyframe.view.empty()) continue;
       if ((T * plane.centroid).norm() > kRangeFactor * longest) continue;
       const Eigen::Vector3d n_sensor = T.linear() * plane.normal;
       int facing = 0, reached = 0;

@@ -162,5 +162,63 @@ TEST(SlamSystem, FramesBetweenKeyframesShareTheCorrectionOfTheirEdge) {
   EXPECT_LT(interpolated, 0.5 * rigid);
 }
 
+TEST(SlamSystem, PlaneDetectedOnceWhereLaterKeyframesLookedIsCulled) {
+  // A camera moves back and forth by 1 cm a frame in front of three walls, a keyframe every frame.
+  // The first frame also detects a patch seen at a grazing angle (a plane fitted across clutter
+  // has any normal); no later keyframe, all within 2 cm of the first, detects it. The sight test
+  // never counts it as looked at (it faces none of them), but keyframes at the first one's
+  // viewpoint saw what it saw: the patch is culled, the walls stay.
+  SlamConfig config;
+  config.keyframe_translation = 0.005;
+  config.loop_closure = false;
+  config.depth_map_fill = false;  // planes only: the hand-made clouds are no depth images
+  SlamSystem slam(config, {}, {}, {}, {}, {});
+  struct Patch {
+    Eigen::Vector3d n;
+    double d;
+    Eigen::Vector2d centre;  ///< in the plane's tangent basis [m]
+  };
+  for (int i = 0; i < 12; ++i) {
+    const double y = 0.01 * (i % 4 == 3 ? 1 : i % 4);
+    std::vector<Patch> seen = {{Eigen::Vector3d::UnitX(), 3.0, Eigen::Vector2d::Zero()},
+                               {Eigen::Vector3d::UnitZ(), 2.0, Eigen::Vector2d::Zero()},
+                               {Eigen::Vector3d::UnitY(), 1.5 - y, Eigen::Vector2d::Zero()}};
+    if (i == 0) seen.push_back({-Eigen::Vector3d::UnitY(), 0.1, Eigen::Vector2d(0.0, 2.0)});
+    const int blocks = static_cast<int>(seen.size());
+    datasets::OrganizedCloud cloud(8 * blocks, 8);
+    detection::Segmentation s;
+    s.width = cloud.width;
+    s.height = cloud.height;
+    s.labels.assign(cloud.size(), -1);
+    for (int k = 0; k < blocks; ++k) {
+      const Patch& patch = seen[static_cast<std::size_t>(k)];
+      detection::Plane plane = registration::test::MakePlane(patch.n, patch.d);
+      plane.id = k + 1;
+      const Eigen::Matrix<double, 3, 2> tangent = registration::TangentBasis(patch.n);
+      for (int r = 0; r < 8; ++r) {
+        for (int c = 0; c < 8; ++c) {
+          const Eigen::Vector3d p =
+              patch.n * patch.d +
+              tangent * (patch.centre + Eigen::Vector2d(0.1 * (c - 3.5), 0.1 * (r - 3.5)));
+          const std::size_t pixel = static_cast<std::size_t>(r) * cloud.width + 8 * k + c;
+          cloud.points[pixel] = p.cast<float>();
+          s.labels[pixel] = plane.id;
+          plane.moments.Add(p);
+        }
+      }
+      plane.centroid = plane.moments.Fit().centroid;
+      s.planes.push_back(plane);
+    }
+    slam.ProcessFrame(i / 30.0, cloud, s);
+  }
+  slam.Finish();
+  EXPECT_GE(slam.stats().keyframes, 10u);
+  EXPECT_EQ(slam.stats().map_planes_culled, 1u);
+  ASSERT_EQ(slam.map().planes().size(), 3u);
+  for (const MapPlane& plane : slam.map().planes()) {
+    EXPECT_GT(plane.d, 1.0) << "plane " << plane.id;  // a wall, not the patch (d = 0.1)
+  }
+}
+
 }  // namespace
 }  // namespace planeslam::mapping
