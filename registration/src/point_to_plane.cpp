@@ -277,6 +277,7 @@ bool FillDegenerateDirections(const DirectionAligner& align, const FillLimits& l
   result->point_directions = static_cast<int>(keep.size());
   result->prior_directions = k - static_cast<int>(keep.size());
   for (int i : keep) result->prior_translations -= IsTranslation(D.col(i)) ? 1 : 0;
+  result->prior_translations = std::clamp(result->prior_translations, 0, result->prior_directions);
   return true;
 }
 
