@@ -11,7 +11,7 @@ RUN_ARGS ?=
 # Debian 12 packages the build needs (PCL without recommends: about a minute instead of many);
 # pybind11, numpy, pytest: the Python module; parallel, slurm-wlm, munge: planeslam batch.
 DEB_PACKAGES := build-essential cmake ccache pkg-config libeigen3-dev libceres-dev liboctomap-dev \
-  libpcl-dev libyaml-cpp-dev libgtest-dev libgmock-dev libcli11-dev libpng-dev zlib1g-dev libdeflate-dev \
+  libpcl-dev libabsl-dev libyaml-cpp-dev libgtest-dev libgmock-dev libcli11-dev libpng-dev zlib1g-dev libdeflate-dev \
   nlohmann-json3-dev clang libclang-rt-14-dev python3 \
   pybind11-dev python3-dev python3-numpy python3-pytest \
   parallel slurm-wlm munge nodejs chromium

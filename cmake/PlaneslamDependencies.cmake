@@ -7,6 +7,7 @@ find_package(PNG REQUIRED)
 find_package(ZLIB REQUIRED)
 find_package(Ceres REQUIRED)
 find_package(Threads REQUIRED)
+find_package(absl REQUIRED)
 
 if(PLANESLAM_WITH_OCTOMAP)
   find_package(octomap REQUIRED)

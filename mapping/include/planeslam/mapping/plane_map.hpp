@@ -26,6 +26,7 @@
 /// can be negative (unlike detection::Plane, whose d >= 0 holds in the sensor frame only).
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <absl/container/flat_hash_set.h>
 #include <cstdint>
 #include <string>
 #include <unordered_map>
@@ -208,8 +209,9 @@ class PlaneMap {
   struct Extent {
     PlaneBasis basis;
     double cell = 0.0;
-    std::unordered_set<std::int64_t> fine;    ///< cells of size `cell`
-    std::unordered_set<std::int64_t> coarse;  ///< cells of size max_gap (fast rejection)
+    // Open-addressing sets: the extents are rebuilt after every whole-graph optimisation.
+    absl::flat_hash_set<std::int64_t> fine;    ///< cells of size `cell`
+    absl::flat_hash_set<std::int64_t> coarse;  ///< cells of size max_gap (fast rejection)
   };
 
   PlaneObservation MakeObservation(std::int64_t keyframe_id, const detection::Plane& plane,
