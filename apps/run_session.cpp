@@ -143,7 +143,9 @@ RunSession::RunSession(Config config, const std::string& method, std::string inp
   want_octomap_ = octomap.enabled && mapping::OccupancyMapBuilder::available();
   const auto& report = config_.Get<ReportConfig>("report");
   keep_keyframe_clouds_ = want_octomap_ || (report.enabled && report.cloud_points > 0);
-  keyframe_voxel_ = want_octomap_ ? octomap.downsample_voxel : 0.05;
+  // Thinned at the sensor profile's voxel, which the OctoMap also uses (a LiDAR's is coarser
+  // than a depth camera's): the report's cloud needs no more.
+  keyframe_voxel_ = want_octomap_ || octomap.downsample_voxel > 0 ? octomap.downsample_voxel : 0.05;
   frame_log_ << "index,timestamp,keyframe,planes,matches,tracked,degenerate,point_to_plane,"
                 "loop_closures,refused,closures_rejected,closures_retracted,status,constrained_by,weak_directions\n";
   wall_start_ = Clock::now();
