@@ -34,9 +34,9 @@ constexpr int kMinLooks = 5;
 constexpr double kSameViewTranslation = 0.10;  // [m]
 constexpr double kSameViewAngleDeg = 5.0;
 
-/// Whether the keyframe at pose `a` saw what the one at `b` saw: nearly the same viewpoint.
-bool SameView(const Pose& a, const Pose& b) {
-  const Pose d = a.inverse() * b;
+/// Whether two keyframes (their T_sensor_world) stood at nearly the same viewpoint.
+bool SameView(const Pose& a_sensor_world, const Pose& b_sensor_world) {
+  const Pose d = a_sensor_world * b_sensor_world.inverse();  // T_a_b
   const double cos_angle = std::cos(kSameViewAngleDeg * M_PI / 180.0);
   // The rotation angle theta of d: trace = 1 + 2 cos(theta).
   return d.translation().norm() <= kSameViewTranslation &&
