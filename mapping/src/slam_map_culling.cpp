@@ -36,11 +36,10 @@ constexpr double kSameViewAngleDeg = 5.0;
 
 /// Whether two keyframes (their T_sensor_world) stood at nearly the same viewpoint.
 bool SameView(const Pose& a_sensor_world, const Pose& b_sensor_world) {
+  static const double min_trace = 1.0 + 2.0 * std::cos(kSameViewAngleDeg * M_PI / 180.0);
   const Pose d = a_sensor_world * b_sensor_world.inverse();  // T_a_b
-  const double cos_angle = std::cos(kSameViewAngleDeg * M_PI / 180.0);
   // The rotation angle theta of d: trace = 1 + 2 cos(theta).
-  return d.translation().norm() <= kSameViewTranslation &&
-         d.linear().trace() >= 1.0 + 2.0 * cos_angle;
+  return d.translation().norm() <= kSameViewTranslation && d.linear().trace() >= min_trace;
 }
 
 }  // namespace

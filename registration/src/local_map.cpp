@@ -546,8 +546,8 @@ bool FillDegenerateFromLocalMap(const LocalVoxelMap& map, const Pose& T_world_pr
   result->used_icp = true;
   result->point_directions = static_cast<int>(keep.size());
   result->prior_directions = k - static_cast<int>(keep.size());
-  for (int i : keep) result->prior_translations -= IsTranslation(D.col(i)) ? 1 : 0;
-  result->prior_translations = std::clamp(result->prior_translations, 0, result->prior_directions);
+  result->prior_translations = internal::PriorTranslationsAfter(
+      result->prior_translations, result->prior_directions, D, keep);
   result->used_prior = result->prior_directions > 0;
   return true;
 }

@@ -7,6 +7,7 @@
 #include <limits>
 
 #include "planeslam/registration/geometry.hpp"
+#include "prior_step.hpp"
 
 namespace planeslam::registration {
 
@@ -235,12 +236,8 @@ double ExtentMismatchChi2(const PlaneExtent& a, const PlaneExtent& b) {
 
 namespace {
 
-bool IsTranslationDirection(const Vector6d& d) { return d.tail<3>().norm() < 1e-9; }
-
-/// chi^2(m) 99.9% quantile by Wilson-Hilferty: m (1 - 2/(9m) + 3.09 sqrt(2/(9m)))^3.
-double Chi2Quantile999(double m) {
-  return m * std::pow(1.0 - 2.0 / (9.0 * m) + 3.09 * std::sqrt(2.0 / (9.0 * m)), 3);
-}
+using internal::Chi2Quantile999;
+using internal::IsTranslation;
 
 /// A matched pair of complete planes: previous and current extents, previous normal.
 struct ExtentPair {
@@ -370,7 +367,7 @@ bool FillDegenerateFromExtents(const std::vector<detection::Plane>& prev_planes,
     const Eigen::MatrixXd info = s.information + Eigen::MatrixXd::Identity(k, k) * 1e-12;
     const Eigen::MatrixXd cov = info.ldlt().solve(Eigen::MatrixXd::Identity(k, k));
     for (int i = 0; i < k; ++i) {
-      const double limit = IsTranslationDirection(D.col(i)) ? config.max_translation_sigma
+      const double limit = IsTranslation(D.col(i)) ? config.max_translation_sigma
                                                             : config.max_rotation_sigma;
       if (std::isfinite(cov(i, i)) && std::sqrt(std::max(cov(i, i), 0.0)) < limit) {
         keep.push_back(i);
@@ -405,8 +402,8 @@ bool FillDegenerateFromExtents(const std::vector<detection::Plane>& prev_planes,
   const int filled = static_cast<int>(keep.size());
   result->extent_directions = filled;
   result->prior_directions = std::max(0, result->prior_directions - filled);
-  for (int i : keep) result->prior_translations -= IsTranslationDirection(D.col(i)) ? 1 : 0;
-  result->prior_translations = std::max(0, result->prior_translations);
+  result->prior_translations = internal::PriorTranslationsAfter(
+      result->prior_translations, result->prior_directions, D, keep);
   result->used_prior = result->prior_directions > 0;
   return true;
 }

@@ -276,8 +276,8 @@ bool FillDegenerateDirections(const DirectionAligner& align, const FillLimits& l
   result->used_prior = static_cast<int>(keep.size()) < k;
   result->point_directions = static_cast<int>(keep.size());
   result->prior_directions = k - static_cast<int>(keep.size());
-  for (int i : keep) result->prior_translations -= IsTranslation(D.col(i)) ? 1 : 0;
-  result->prior_translations = std::clamp(result->prior_translations, 0, result->prior_directions);
+  result->prior_translations = internal::PriorTranslationsAfter(
+      result->prior_translations, result->prior_directions, D, keep);
   return true;
 }
 

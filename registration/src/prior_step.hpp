@@ -1,17 +1,28 @@
 #pragma once
-// Private: what the point aligners (point_to_plane.cpp, depth_local_map.cpp, local_map.cpp)
-// share: the input check, the prior's information and the regularised Gauss-Newton step along a
-// set of directions with a Gaussian prior on their coefficients.
+// Private: what the fills of open directions share (point_to_plane.cpp, depth_local_map.cpp,
+// local_map.cpp, plane_extent.cpp): the input check, the prior's information, the regularised
+// Gauss-Newton step along a set of directions with a Gaussian prior on their coefficients, and
+// the count of directions still left to the prior.
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
 #include <utility>
+#include <vector>
 
 namespace planeslam::registration::internal {
 
 /// A direction of the tangent (6-vector, geometry.hpp) without a rotation part.
 inline bool IsTranslation(const Eigen::VectorXd& dir) { return dir.tail<3>().norm() < 1e-9; }
+
+/// The prior's count of translation directions after a fill measured the columns `keep` of `D`:
+/// their translations leave it, and it stays within [0, prior_directions] (the count after the
+/// fill), since two fills of one frame may measure the same direction.
+inline int PriorTranslationsAfter(int prior_translations, int prior_directions,
+                                  const Eigen::MatrixXd& D, const std::vector<int>& keep) {
+  for (int i : keep) prior_translations -= IsTranslation(D.col(i)) ? 1 : 0;
+  return std::clamp(prior_translations, 0, std::max(prior_directions, 0));
+}
 
 /// chi^2(m) 99.9% quantile by Wilson-Hilferty: m (1 - 2/(9m) + 3.09 sqrt(2/(9m)))^3.
 inline double Chi2Quantile999(double m) {

@@ -29,6 +29,46 @@ detection::Segmentation PlanesOnly(std::vector<detection::Plane> planes) {
   return s;
 }
 
+/// A hand-made plane seen as an 8 x 8 grid of points (the map needs points): normal, offset, the
+/// grid's centre in the plane's tangent basis and its spacing [m].
+struct Patch {
+  Eigen::Vector3d n;
+  double d;
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+  double spacing = 0.25;
+};
+
+/// A frame of patches (plane ids 1, 2, ...), each in its own 8-column block of `cloud`.
+detection::Segmentation PatchFrame(const std::vector<Patch>& patches,
+                                   datasets::OrganizedCloud* cloud) {
+  *cloud = datasets::OrganizedCloud(8 * static_cast<int>(patches.size()), 8);
+  detection::Segmentation s;
+  s.width = cloud->width;
+  s.height = cloud->height;
+  s.labels.assign(cloud->size(), -1);
+  for (std::size_t k = 0; k < patches.size(); ++k) {
+    const Patch& patch = patches[k];
+    detection::Plane plane = registration::test::MakePlane(patch.n, patch.d);
+    plane.id = static_cast<int>(k) + 1;
+    const Eigen::Matrix<double, 3, 2> tangent = registration::TangentBasis(patch.n);
+    plane.centroid = patch.n * patch.d + tangent * patch.centre;
+    for (int r = 0; r < 8; ++r) {
+      for (int c = 0; c < 8; ++c) {
+        const Eigen::Vector3d p =
+            patch.n * patch.d +
+            tangent * (patch.centre +
+                       patch.spacing * Eigen::Vector2d(c - 3.5, r - 3.5));
+        const std::size_t pixel = static_cast<std::size_t>(r) * cloud->width + 8 * k + c;
+        cloud->points[pixel] = p.cast<float>();
+        s.labels[pixel] = plane.id;
+        plane.moments.Add(p);
+      }
+    }
+    s.planes.push_back(plane);
+  }
+  return s;
+}
+
 TEST(SlamSystem, FrameWhosePlanesAllMatchKeepsItsKeyframe) {
   // Two walls only (normals x and z), seen from a camera sliding along y by 1 cm per frame: every
   // frame matches 2 planes, fewer than keyframe_min_matches (6), but has no plane its keyframe
@@ -123,34 +163,11 @@ TEST(SlamSystem, FramesBetweenKeyframesShareTheCorrectionOfTheirEdge) {
     config.depth_map_fill = false;  // planes only: the hand-made clouds are no depth images
     SlamSystem slam(config, {}, {}, {}, {}, {});
     for (int i = 0; i < static_cast<int>(true_y.size()); ++i) {
-      // Each plane is an 8 x 8 grid of points 25 cm apart around its foot point (the map needs
-      // points), in its own 8-column block of the image.
-      std::vector<std::pair<Eigen::Vector3d, double>> seen = {{Eigen::Vector3d::UnitX(), 3.0},
-                                                              {Eigen::Vector3d::UnitZ(), 2.0}};
-      if (i < 6 || i >= 20) seen.emplace_back(Eigen::Vector3d::UnitY(), 1.5 - true_y[i]);
-      const int blocks = static_cast<int>(seen.size());
-      datasets::OrganizedCloud cloud(8 * blocks, 8);
-      detection::Segmentation s;
-      s.width = cloud.width;
-      s.height = cloud.height;
-      s.labels.assign(cloud.size(), -1);
-      for (int k = 0; k < blocks; ++k) {
-        const auto& [n, d] = seen[static_cast<std::size_t>(k)];
-        detection::Plane plane = registration::test::MakePlane(n, d);
-        plane.id = k + 1;
-        const Eigen::Matrix<double, 3, 2> tangent = registration::TangentBasis(n);
-        for (int r = 0; r < 8; ++r) {
-          for (int c = 0; c < 8; ++c) {
-            const Eigen::Vector3d p =
-                n * d + tangent * Eigen::Vector2d(0.25 * (c - 3.5), 0.25 * (r - 3.5));
-            const std::size_t pixel = static_cast<std::size_t>(r) * cloud.width + 8 * k + c;
-            cloud.points[pixel] = p.cast<float>();
-            s.labels[pixel] = plane.id;
-            plane.moments.Add(p);
-          }
-        }
-        s.planes.push_back(plane);
-      }
+      // Each plane is an 8 x 8 grid of points 25 cm apart around its foot point.
+      std::vector<Patch> seen = {{Eigen::Vector3d::UnitX(), 3.0}, {Eigen::Vector3d::UnitZ(), 2.0}};
+      if (i < 6 || i >= 20) seen.push_back({Eigen::Vector3d::UnitY(), 1.5 - true_y[i]});
+      datasets::OrganizedCloud cloud;
+      const detection::Segmentation s = PatchFrame(seen, &cloud);
       slam.ProcessFrame(i / 30.0, cloud, s);
     }
     slam.Finish();
@@ -173,42 +190,14 @@ TEST(SlamSystem, PlaneDetectedOnceWhereLaterKeyframesLookedIsCulled) {
   config.loop_closure = false;
   config.depth_map_fill = false;  // planes only: the hand-made clouds are no depth images
   SlamSystem slam(config, {}, {}, {}, {}, {});
-  struct Patch {
-    Eigen::Vector3d n;
-    double d;
-    Eigen::Vector2d centre;  ///< in the plane's tangent basis [m]
-  };
   for (int i = 0; i < 12; ++i) {
     const double y = 0.01 * (i % 4 == 3 ? 1 : i % 4);
-    std::vector<Patch> seen = {{Eigen::Vector3d::UnitX(), 3.0, Eigen::Vector2d::Zero()},
-                               {Eigen::Vector3d::UnitZ(), 2.0, Eigen::Vector2d::Zero()},
-                               {Eigen::Vector3d::UnitY(), 1.5 - y, Eigen::Vector2d::Zero()}};
-    if (i == 0) seen.push_back({-Eigen::Vector3d::UnitY(), 0.1, Eigen::Vector2d(0.0, 2.0)});
-    const int blocks = static_cast<int>(seen.size());
-    datasets::OrganizedCloud cloud(8 * blocks, 8);
-    detection::Segmentation s;
-    s.width = cloud.width;
-    s.height = cloud.height;
-    s.labels.assign(cloud.size(), -1);
-    for (int k = 0; k < blocks; ++k) {
-      const Patch& patch = seen[static_cast<std::size_t>(k)];
-      detection::Plane plane = registration::test::MakePlane(patch.n, patch.d);
-      plane.id = k + 1;
-      const Eigen::Matrix<double, 3, 2> tangent = registration::TangentBasis(patch.n);
-      for (int r = 0; r < 8; ++r) {
-        for (int c = 0; c < 8; ++c) {
-          const Eigen::Vector3d p =
-              patch.n * patch.d +
-              tangent * (patch.centre + Eigen::Vector2d(0.1 * (c - 3.5), 0.1 * (r - 3.5)));
-          const std::size_t pixel = static_cast<std::size_t>(r) * cloud.width + 8 * k + c;
-          cloud.points[pixel] = p.cast<float>();
-          s.labels[pixel] = plane.id;
-          plane.moments.Add(p);
-        }
-      }
-      plane.centroid = plane.moments.Fit().centroid;
-      s.planes.push_back(plane);
-    }
+    std::vector<Patch> seen = {{Eigen::Vector3d::UnitX(), 3.0, Eigen::Vector2d::Zero(), 0.1},
+                               {Eigen::Vector3d::UnitZ(), 2.0, Eigen::Vector2d::Zero(), 0.1},
+                               {Eigen::Vector3d::UnitY(), 1.5 - y, Eigen::Vector2d::Zero(), 0.1}};
+    if (i == 0) seen.push_back({-Eigen::Vector3d::UnitY(), 0.1, Eigen::Vector2d(0.0, 2.0), 0.1});
+    datasets::OrganizedCloud cloud;
+    const detection::Segmentation s = PatchFrame(seen, &cloud);
     slam.ProcessFrame(i / 30.0, cloud, s);
   }
   slam.Finish();
