@@ -74,14 +74,15 @@ void SlamSystem::SearchLoopClosures(const Keyframe& current, SlamFrameResult* re
     std::size_t index;
   };
   std::vector<Candidate> candidates;
+  // Every older keyframe is a possible candidate; the distance, read from the node's position,
+  // rules out most of them before a pose is built.
   for (std::size_t i = 0; i < keyframes_.size(); ++i) {
     if (keyframes_[i].id > current.id - config_.loop_min_keyframe_gap) break;
-    const Pose T_world_old = KeyframePose(keyframes_[i].id);
-    const double distance = (T_world_old.translation() - T_world_current.translation()).norm();
-    const double angle = RotationAngle(T_world_old.inverse() * T_world_current);
-    if (distance < config_.loop_search_radius && angle < config_.loop_max_angle_deg * kDegToRad) {
-      candidates.push_back({distance, i});
-    }
+    const PoseGraphNode& node = graph_.node(keyframes_[i].id);
+    const double distance = (node.position - T_world_current.translation()).norm();
+    if (!(distance < config_.loop_search_radius)) continue;
+    const double angle = RotationAngle(node.T_world_node().inverse() * T_world_current);
+    if (angle < config_.loop_max_angle_deg * kDegToRad) candidates.push_back({distance, i});
   }
   std::sort(candidates.begin(), candidates.end(), [](const Candidate& a, const Candidate& b) {
     return a.distance < b.distance || (a.distance == b.distance && a.index < b.index);

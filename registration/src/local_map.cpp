@@ -66,7 +66,10 @@ Eigen::Matrix3d NeighbourhoodShape(const std::vector<const ScanPoint*>& neighbou
   for (const ScanPoint* q : neighbours) {
     cov.noalias() += (q->position - mean) * (q->position - mean).transpose();
   }
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
+  // Closed form: the shape needs only the eigenvalues' ratios and the eigenvectors of those
+  // below a ninth of the largest, which are well separated from it.
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
+  es.computeDirect(cov);
   const Eigen::Vector3d lambda = es.eigenvalues();  // ascending
   if (!(lambda(2) > 0)) return Eigen::Matrix3d::Zero();
   Eigen::Matrix3d shape = Eigen::Matrix3d::Zero();
@@ -107,37 +110,43 @@ std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, doubl
           static_cast<int>(i);
     }
   }
-  std::vector<ShapedPoint> shaped;
-  shaped.reserve(points.size());
+  // Voxel by voxel: the points of the 27 voxels around one are gathered once for all of its
+  // points. The neighbours of a point keep the order of the candidates (voxel offsets, then input
+  // order), so each shape is the same whatever order the points are taken in.
+  std::vector<Eigen::Matrix3d> shape_of(points.size(), Eigen::Matrix3d::Zero());
   std::vector<const ScanPoint*> neighbours;
-  const double r2 = radius * radius;
-  // The points of the 27 voxels around a voxel, kept for the next point when it is in the same
-  // voxel (consecutive pixels of a row mostly are).
   std::vector<int> candidates;
-  int candidates_of = -1;
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    if (voxel_of[i] != candidates_of) {
-      candidates_of = voxel_of[i];
-      candidates.clear();
-      const Eigen::Vector3i key = VoxelOf(points[i].position, radius);
-      for (int dx = -1; dx <= 1; ++dx) {
-        for (int dy = -1; dy <= 1; ++dy) {
-          for (int dz = -1; dz <= 1; ++dz) {
-            const int v = index.Find(key + Eigen::Vector3i(dx, dy, dz));
-            if (v < 0) continue;
-            candidates.insert(candidates.end(), order.begin() + start[static_cast<std::size_t>(v)],
-                              order.begin() + start[static_cast<std::size_t>(v) + 1]);
-          }
+  const double r2 = radius * radius;
+  const int voxels = static_cast<int>(start.size()) - 1;
+  for (int v = 0; v < voxels; ++v) {
+    const std::size_t first = static_cast<std::size_t>(order[static_cast<std::size_t>(start[v])]);
+    const Eigen::Vector3i key = VoxelOf(points[first].position, radius);
+    candidates.clear();
+    for (int dx = -1; dx <= 1; ++dx) {
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dz = -1; dz <= 1; ++dz) {
+          const int u = index.Find(key + Eigen::Vector3i(dx, dy, dz));
+          if (u < 0) continue;
+          candidates.insert(candidates.end(), order.begin() + start[static_cast<std::size_t>(u)],
+                            order.begin() + start[static_cast<std::size_t>(u) + 1]);
         }
       }
     }
-    neighbours.clear();
-    for (const int j : candidates) {
-      const ScanPoint& q = points[static_cast<std::size_t>(j)];
-      if ((q.position - points[i].position).squaredNorm() <= r2) neighbours.push_back(&q);
+    for (int k = start[static_cast<std::size_t>(v)]; k < start[static_cast<std::size_t>(v) + 1];
+         ++k) {
+      const std::size_t i = static_cast<std::size_t>(order[static_cast<std::size_t>(k)]);
+      neighbours.clear();
+      for (const int j : candidates) {
+        const ScanPoint& q = points[static_cast<std::size_t>(j)];
+        if ((q.position - points[i].position).squaredNorm() <= r2) neighbours.push_back(&q);
+      }
+      shape_of[i] = NeighbourhoodShape(neighbours);
     }
-    const Eigen::Matrix3d shape = NeighbourhoodShape(neighbours);
-    if (!shape.isZero()) shaped.push_back({points[i].position, shape});
+  }
+  std::vector<ShapedPoint> shaped;
+  shaped.reserve(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    if (!shape_of[i].isZero()) shaped.push_back({points[i].position, shape_of[i]});
   }
   return shaped;
 }
