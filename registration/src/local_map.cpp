@@ -41,8 +41,15 @@ std::vector<ScanPoint> StructurePoints(const datasets::OrganizedCloud& cloud,
 
 namespace {
 
+/// floor(x) as an int, without a libm call (the build targets x86-64 without SSE4.1's rounding
+/// instruction); the same value as static_cast<int>(std::floor(x)) wherever that is defined.
+int FloorToInt(double x) {
+  const int truncated = static_cast<int>(x);
+  return truncated - (static_cast<double>(truncated) > x ? 1 : 0);
+}
+
 Eigen::Vector3i VoxelOf(const Eigen::Vector3d& p, double voxel) {
-  return (p / voxel).array().floor().cast<int>();
+  return {FloorToInt(p.x() / voxel), FloorToInt(p.y() / voxel), FloorToInt(p.z() / voxel)};
 }
 
 /// The projector onto the axes along which the neighbourhood of a point is thin: a variance
