@@ -124,8 +124,7 @@ std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, doubl
   std::vector<const ScanPoint*> neighbours;
   std::vector<int> candidates;
   const double r2 = radius * radius;
-  const int voxels = static_cast<int>(start.size()) - 1;
-  for (int v = 0; v < voxels; ++v) {
+  for (std::size_t v = 0; v + 1 < start.size(); ++v) {
     const std::size_t first = static_cast<std::size_t>(order[static_cast<std::size_t>(start[v])]);
     const Eigen::Vector3i key = VoxelOf(points[first].position, radius);
     candidates.clear();
@@ -139,8 +138,7 @@ std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, doubl
         }
       }
     }
-    for (int k = start[static_cast<std::size_t>(v)]; k < start[static_cast<std::size_t>(v) + 1];
-         ++k) {
+    for (int k = start[v]; k < start[v + 1]; ++k) {
       const std::size_t i = static_cast<std::size_t>(order[static_cast<std::size_t>(k)]);
       neighbours.clear();
       for (const int j : candidates) {
