@@ -373,16 +373,18 @@ struct PairSums {
   double sum_sq = 0.0;
 };
 
-PairSums AccumulatePairs(const LocalVoxelMap& map, const Pose& T_world_prev,
-                         const std::vector<ShapedPoint>& source, const Pose& T,
-                         const Eigen::MatrixXd& D, const std::vector<char>& is_translation) {
+/// AccumulatePairs for K directions (Eigen::Dynamic: any number up to six).
+template <int K>
+PairSums AccumulatePairsOf(const LocalVoxelMap& map, const Pose& T_world_prev,
+                           const std::vector<ShapedPoint>& source, const Pose& T,
+                           const Eigen::MatrixXd& D, const std::vector<char>& is_translation) {
   // At most six directions: fixed-capacity matrices keep the loop free of heap allocations.
-  using MatK = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 6, 6>;
-  using Mat3K = Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, 6>;
+  using MatK = Eigen::Matrix<double, K, K, 0, 6, 6>;
+  using Mat3K = Eigen::Matrix<double, 3, K, 0, 3, 6>;
+  using VecK = Eigen::Matrix<double, K, 1, 0, 6, 1>;
   const int k = static_cast<int>(D.cols());
   MatK H = MatK::Zero(k, k);
-  Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1> g =
-      Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1>::Zero(k);
+  VecK g = VecK::Zero(k);
   PairSums s;
   s.support.assign(k, 0);
   const Eigen::Matrix3d R_wp = T_world_prev.linear();
@@ -424,6 +426,15 @@ PairSums AccumulatePairs(const LocalVoxelMap& map, const Pose& T_world_prev,
   s.H = H;
   s.g = g;
   return s;
+}
+
+/// The Gauss-Newton sums of one iteration at T_prev_curr; all six directions (the usual case on
+/// the local map) with fixed-size matrices.
+PairSums AccumulatePairs(const LocalVoxelMap& map, const Pose& T_world_prev,
+                         const std::vector<ShapedPoint>& source, const Pose& T,
+                         const Eigen::MatrixXd& D, const std::vector<char>& is_translation) {
+  if (D.cols() == 6) return AccumulatePairsOf<6>(map, T_world_prev, source, T, D, is_translation);
+  return AccumulatePairsOf<Eigen::Dynamic>(map, T_world_prev, source, T, D, is_translation);
 }
 
 }  // namespace
