@@ -51,9 +51,10 @@ std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>&
     Eigen::Vector3i key;
     bool inside = true;
     for (int a = 0; a < 3 && inside; ++a) {
-      const double idx = std::floor(p[a] / voxel);
-      inside = idx >= -kHalf && idx < kHalf;
-      key[a] = inside ? static_cast<int>(idx) : 0;
+      // Inside exactly when its floor is (the bounds are integers).
+      const double q = p[a] / voxel;
+      inside = q >= -kHalf && q < kHalf;
+      key[a] = inside ? registration::FloorToInt(q) : 0;
     }
     if (!inside) continue;
     if (last < 0 || keys[last] != key) {
@@ -68,15 +69,20 @@ std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>&
     sums[last] += p.cast<double>();
     ++counts[last];
   }
-  std::vector<int> order(keys.size());
-  for (std::size_t k = 0; k < order.size(); ++k) order[k] = static_cast<int>(k);
-  std::sort(order.begin(), order.end(), [&](int a, int b) {
-    return std::lexicographical_compare(keys[a].data(), keys[a].data() + 3, keys[b].data(),
-                                        keys[b].data() + 3);
-  });
+  // (x, y, z) order is the order of the keys packed into 21 bits each, offset to be non-negative:
+  // the sort compares one integer, not three through an index.
+  std::vector<std::pair<std::uint64_t, int>> order(keys.size());
+  for (std::size_t k = 0; k < order.size(); ++k) {
+    std::uint64_t packed = 0;
+    for (int a = 0; a < 3; ++a) {
+      packed = packed << 21 | static_cast<std::uint64_t>(keys[k][a] + (1 << 20));
+    }
+    order[k] = {packed, static_cast<int>(k)};
+  }
+  std::sort(order.begin(), order.end());
   std::vector<Eigen::Vector3f> out;
   out.reserve(order.size());
-  for (const int k : order) out.push_back((sums[k] / counts[k]).cast<float>());
+  for (const auto& [packed, k] : order) out.push_back((sums[k] / counts[k]).cast<float>());
   return out;
 }
 

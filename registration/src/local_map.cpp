@@ -41,13 +41,6 @@ std::vector<ScanPoint> StructurePoints(const datasets::OrganizedCloud& cloud,
 
 namespace {
 
-/// floor(x) as an int, without a libm call (the build targets x86-64 without SSE4.1's rounding
-/// instruction); the same value as static_cast<int>(std::floor(x)) wherever that is defined.
-int FloorToInt(double x) {
-  const int truncated = static_cast<int>(x);
-  return truncated - (static_cast<double>(truncated) > x ? 1 : 0);
-}
-
 Eigen::Vector3i VoxelOf(const Eigen::Vector3d& p, double voxel) {
   return {FloorToInt(p.x() / voxel), FloorToInt(p.y() / voxel), FloorToInt(p.z() / voxel)};
 }

@@ -11,6 +11,13 @@
 
 namespace planeslam::registration {
 
+/// floor(x) as an int, without a libm call (the build targets x86-64 without SSE4.1's rounding
+/// instruction): the same value as static_cast<int>(std::floor(x)) wherever that is defined.
+inline int FloorToInt(double x) {
+  const int truncated = static_cast<int>(x);
+  return truncated - (static_cast<double>(truncated) > x ? 1 : 0);
+}
+
 class VoxelIndex {
  public:
   /// Sized for about `expected` voxels (it grows when needed).
