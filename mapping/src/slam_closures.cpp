@@ -3,7 +3,6 @@
 // (window or whole graph) and retraction of the robust kernel's outliers; and the test hook that
 // injects false closures.
 #include <algorithm>
-#include <cmath>
 #include <random>
 #include <sstream>
 #include <unordered_set>
@@ -81,13 +80,9 @@ void SlamSystem::SearchLoopClosures(const Keyframe& current, SlamFrameResult* re
   // (AddKeyframe adds both), so the nodes are read in order rather than looked up by id.
   const std::vector<PoseGraphNode>& nodes = graph_.nodes();
   PLANESLAM_CHECK(nodes.size() == keyframes_.size(), "one pose graph node per keyframe");
-  // A bound a little looser than the radius, squared: the test itself is on the distance.
-  const double loose2 = 1.001 * config_.loop_search_radius * config_.loop_search_radius;
   for (std::size_t i = 0; i < nodes.size(); ++i) {
     if (nodes[i].id > current.id - config_.loop_min_keyframe_gap) break;
-    const double distance2 = (nodes[i].position - T_world_current.translation()).squaredNorm();
-    if (!(distance2 <= loose2)) continue;
-    const double distance = std::sqrt(distance2);
+    const double distance = (nodes[i].position - T_world_current.translation()).norm();
     if (!(distance < config_.loop_search_radius)) continue;
     const double angle = RotationAngle(nodes[i].T_world_node().inverse() * T_world_current);
     if (angle < config_.loop_max_angle_deg * kDegToRad) candidates.push_back({distance, i});

@@ -89,10 +89,15 @@ std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, doubl
   VoxelIndex index(points.size() / 2);
   std::vector<int> voxel_of(points.size());
   std::vector<int> start;
+  std::vector<Eigen::Vector3i> keys;  // per voxel
   for (std::size_t i = 0; i < points.size(); ++i) {
     bool inserted = false;
-    voxel_of[i] = index.Insert(VoxelOf(points[i].position, radius), &inserted);
-    if (inserted) start.push_back(0);
+    const Eigen::Vector3i key = VoxelOf(points[i].position, radius);
+    voxel_of[i] = index.Insert(key, &inserted);
+    if (inserted) {
+      start.push_back(0);
+      keys.push_back(key);
+    }
     ++start[static_cast<std::size_t>(voxel_of[i])];
   }
   int sum = 0;
@@ -117,9 +122,8 @@ std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, doubl
   std::vector<const ScanPoint*> neighbours;
   std::vector<int> candidates;
   const double r2 = radius * radius;
-  for (std::size_t v = 0; v + 1 < start.size(); ++v) {
-    const std::size_t first = static_cast<std::size_t>(order[static_cast<std::size_t>(start[v])]);
-    const Eigen::Vector3i key = VoxelOf(points[first].position, radius);
+  for (std::size_t v = 0; v < keys.size(); ++v) {
+    const Eigen::Vector3i& key = keys[v];
     candidates.clear();
     for (int dx = -1; dx <= 1; ++dx) {
       for (int dy = -1; dy <= 1; ++dy) {

@@ -367,8 +367,8 @@ bool FillDegenerateFromExtents(const std::vector<detection::Plane>& prev_planes,
     const Eigen::MatrixXd info = s.information + Eigen::MatrixXd::Identity(k, k) * 1e-12;
     const Eigen::MatrixXd cov = info.ldlt().solve(Eigen::MatrixXd::Identity(k, k));
     for (int i = 0; i < k; ++i) {
-      const double limit = IsTranslation(D.col(i)) ? config.max_translation_sigma
-                                                            : config.max_rotation_sigma;
+      const double limit =
+          IsTranslation(D.col(i)) ? config.max_translation_sigma : config.max_rotation_sigma;
       if (std::isfinite(cov(i, i)) && std::sqrt(std::max(cov(i, i), 0.0)) < limit) {
         keep.push_back(i);
       }
