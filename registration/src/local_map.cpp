@@ -45,6 +45,18 @@ Eigen::Vector3i VoxelOf(const Eigen::Vector3d& p, double voxel) {
   return {FloorToInt(p.x() / voxel), FloorToInt(p.y() / voxel), FloorToInt(p.z() / voxel)};
 }
 
+/// The unit eigenvector of the symmetric `C` for its simple eigenvalue `lambda`: the largest
+/// cross product of two rows of C - lambda I (each row is orthogonal to it).
+Eigen::Vector3d EigenvectorOf(const Eigen::Matrix3d& C, double lambda) {
+  const Eigen::Matrix3d M = C - lambda * Eigen::Matrix3d::Identity();
+  const Eigen::Vector3d c01 = M.row(0).transpose().cross(M.row(1).transpose());
+  const Eigen::Vector3d c02 = M.row(0).transpose().cross(M.row(2).transpose());
+  const Eigen::Vector3d c12 = M.row(1).transpose().cross(M.row(2).transpose());
+  const double n01 = c01.squaredNorm(), n02 = c02.squaredNorm(), n12 = c12.squaredNorm();
+  if (n01 >= n02 && n01 >= n12) return c01 / std::sqrt(n01);
+  return n02 >= n12 ? Eigen::Vector3d(c02 / std::sqrt(n02)) : Eigen::Vector3d(c12 / std::sqrt(n12));
+}
+
 /// The projector onto the axes along which the neighbourhood of a point is thin: a variance
 /// below a ninth of the largest (a third in sigma) marks a constrained axis. A surface gives its
 /// normal, an edge or a pole the plane across it. A blob or too few neighbours give zero: such a
@@ -52,34 +64,82 @@ Eigen::Vector3i VoxelOf(const Eigen::Vector3d& p, double voxel) {
 /// would only hold the estimate where it starts. An edge must span two rows and two columns of
 /// the grid: a sparse scan (a LiDAR ring on the road, a far floor's pixel row) looks like a line
 /// that is only the sampling, and moves with the sensor.
-Eigen::Matrix3d NeighbourhoodShape(const std::vector<const ScanPoint*>& neighbours) {
-  if (neighbours.size() < 5) return Eigen::Matrix3d::Zero();
-  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+///
+/// `scatter` is the neighbours' scatter about their mean. Its largest eigenvalue comes from
+/// Newton's method on the characteristic cubic started above it (Gershgorin's bound), where the
+/// cubic is increasing and convex, so the iterates fall monotonically onto it; the other two
+/// solve the quadratic left. A surface needs the eigenvector of the smallest, an edge the plane
+/// across the largest's: each is simple there, being under a ninth of the largest or the largest.
+Eigen::Matrix3d NeighbourhoodShape(const Eigen::Matrix3d& scatter, bool rows_and_cols) {
+  const Eigen::Matrix3d& C = scatter;
+  const double c2 = C.trace();
+  const double c1 = C(0, 0) * C(1, 1) - C(0, 1) * C(0, 1) + C(0, 0) * C(2, 2) -
+                    C(0, 2) * C(0, 2) + C(1, 1) * C(2, 2) - C(1, 2) * C(1, 2);
+  const double c0 = C.determinant();
+  double l2 = 0.0;
+  for (int i = 0; i < 3; ++i) l2 = std::max(l2, C.row(i).cwiseAbs().sum());
+  if (!(l2 > 0)) return Eigen::Matrix3d::Zero();
+  for (int it = 0; it < 100; ++it) {  // a double root halves the gap per step
+    const double p = ((l2 - c2) * l2 + c1) * l2 - c0;
+    const double dp = (3.0 * l2 - 2.0 * c2) * l2 + c1;
+    if (!(p > 0 && dp > 0)) break;
+    const double step = p / dp;
+    l2 -= step;
+    if (step <= 1e-12 * l2) break;
+  }
+  const double half = 0.5 * (c2 - l2);  // the mean of the two others
+  const double l1 = half + std::sqrt(std::max(half * half - c0 / l2, 0.0));
+  const double l0 = c2 - l2 - l1;
+  const double thin = l2 / 9.0;
+  if (!(l1 < thin)) {
+    if (!(l0 < thin)) return Eigen::Matrix3d::Zero();  // a blob
+    const Eigen::Vector3d n = EigenvectorOf(C, l0);
+    return n * n.transpose();  // a surface: its normal
+  }
+  if (!rows_and_cols) return Eigen::Matrix3d::Zero();  // a line that is only the sampling
+  const Eigen::Vector3d a = EigenvectorOf(C, l2);
+  return Eigen::Matrix3d::Identity() - a * a.transpose();  // an edge: the plane across it
+}
+
+/// A candidate neighbour, copied out of the input so that a voxel's scan reads one array.
+struct Candidate {
+  Eigen::Vector3d position;
+  int row = 0;
+  int col = 0;
+};
+
+/// The shape of the neighbours of `p` among `candidates` (those within sqrt(r2), `p` included):
+/// their offsets from `p` are summed in one pass, and the scatter about their mean is
+/// outer - sum sum^T / count (offsets within the radius keep the digits that absolute positions
+/// of a distant scan would lose).
+Eigen::Matrix3d ShapeAmong(const std::vector<Candidate>& candidates, const Eigen::Vector3d& p,
+                           double r2) {
+  int count = 0, first_row = 0, first_col = 0;
   bool rows = false, cols = false;
-  for (const ScanPoint* q : neighbours) {
-    mean += q->position;
-    rows = rows || q->row != neighbours.front()->row;
-    cols = cols || q->col != neighbours.front()->col;
-  }
-  mean /= static_cast<double>(neighbours.size());
-  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-  for (const ScanPoint* q : neighbours) {
-    cov.noalias() += (q->position - mean) * (q->position - mean).transpose();
-  }
-  // Closed form: the shape needs only the eigenvalues' ratios and the eigenvectors of those
-  // below a ninth of the largest, which are well separated from it.
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
-  es.computeDirect(cov);
-  const Eigen::Vector3d lambda = es.eigenvalues();  // ascending
-  if (!(lambda(2) > 0)) return Eigen::Matrix3d::Zero();
-  Eigen::Matrix3d shape = Eigen::Matrix3d::Zero();
-  for (int k = 0; k < 2; ++k) {
-    if (lambda(k) < lambda(2) / 9.0) {
-      shape.noalias() += es.eigenvectors().col(k) * es.eigenvectors().col(k).transpose();
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  double xx = 0, xy = 0, xz = 0, yy = 0, yz = 0, zz = 0;
+  for (const Candidate& q : candidates) {
+    const Eigen::Vector3d d = q.position - p;
+    if (d.squaredNorm() > r2) continue;
+    if (count++ == 0) {
+      first_row = q.row;
+      first_col = q.col;
     }
+    rows = rows || q.row != first_row;
+    cols = cols || q.col != first_col;
+    sum += d;
+    xx += d.x() * d.x();
+    xy += d.x() * d.y();
+    xz += d.x() * d.z();
+    yy += d.y() * d.y();
+    yz += d.y() * d.z();
+    zz += d.z() * d.z();
   }
-  if (shape.trace() > 1.5 && !(rows && cols)) return Eigen::Matrix3d::Zero();
-  return shape;
+  if (count < 5) return Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d scatter;
+  scatter << xx, xy, xz, xy, yy, yz, xz, yz, zz;
+  scatter.noalias() -= sum * sum.transpose() / static_cast<double>(count);
+  return NeighbourhoodShape(scatter, rows && cols);
 }
 
 }  // namespace
@@ -118,9 +178,8 @@ std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, doubl
   // Voxel by voxel: the points of the 27 voxels around one are gathered once for all of its
   // points. The neighbours of a point keep the order of the candidates (voxel offsets, then input
   // order), so each shape is the same whatever order the points are taken in.
-  std::vector<Eigen::Matrix3d> shape_of(points.size(), Eigen::Matrix3d::Zero());
-  std::vector<const ScanPoint*> neighbours;
-  std::vector<int> candidates;
+  std::vector<Eigen::Matrix3d> shape_of(points.size());
+  std::vector<Candidate> candidates;
   const double r2 = radius * radius;
   for (std::size_t v = 0; v < keys.size(); ++v) {
     const Eigen::Vector3i& key = keys[v];
@@ -130,19 +189,17 @@ std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, doubl
         for (int dz = -1; dz <= 1; ++dz) {
           const int u = index.Find(key + Eigen::Vector3i(dx, dy, dz));
           if (u < 0) continue;
-          candidates.insert(candidates.end(), order.begin() + start[static_cast<std::size_t>(u)],
-                            order.begin() + start[static_cast<std::size_t>(u) + 1]);
+          for (int k = start[static_cast<std::size_t>(u)]; k < start[static_cast<std::size_t>(u) + 1];
+               ++k) {
+            const ScanPoint& q = points[static_cast<std::size_t>(order[static_cast<std::size_t>(k)])];
+            candidates.push_back({q.position, q.row, q.col});
+          }
         }
       }
     }
     for (int k = start[v]; k < start[v + 1]; ++k) {
       const std::size_t i = static_cast<std::size_t>(order[static_cast<std::size_t>(k)]);
-      neighbours.clear();
-      for (const int j : candidates) {
-        const ScanPoint& q = points[static_cast<std::size_t>(j)];
-        if ((q.position - points[i].position).squaredNorm() <= r2) neighbours.push_back(&q);
-      }
-      shape_of[i] = NeighbourhoodShape(neighbours);
+      shape_of[i] = ShapeAmong(candidates, points[i].position, r2);
     }
   }
   std::vector<ShapedPoint> shaped;
