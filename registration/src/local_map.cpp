@@ -4,6 +4,7 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 
 #include "prior_step.hpp"
@@ -65,31 +66,34 @@ Eigen::Vector3d EigenvectorOf(const Eigen::Matrix3d& C, double lambda) {
 /// the grid: a sparse scan (a LiDAR ring on the road, a far floor's pixel row) looks like a line
 /// that is only the sampling, and moves with the sensor.
 ///
-/// `scatter` is the neighbours' scatter about their mean. Its largest eigenvalue comes from
-/// Newton's method on the characteristic cubic started above it (Gershgorin's bound), where the
-/// cubic is increasing and convex, so the iterates fall monotonically onto it; the other two
-/// solve the quadratic left. A surface needs the eigenvector of the smallest, an edge the plane
-/// across the largest's: each is simple there, being under a ninth of the largest or the largest.
+/// `scatter` is the neighbours' scatter about their mean. Its smallest eigenvalue comes from
+/// Newton's method on the characteristic cubic started at 0, below it, where the cubic is
+/// increasing and concave, so the iterates rise monotonically onto it (quadratically when it is
+/// simple, as for a surface; for an edge, whose two small ones nearly coincide, a dozen steps
+/// leave it well within the ninth of the largest that decides); the other two solve the
+/// quadratic left. A surface needs the eigenvector of the smallest, an edge the plane across the
+/// largest's: each is simple there, being under a ninth of the largest or the largest.
 Eigen::Matrix3d NeighbourhoodShape(const Eigen::Matrix3d& scatter, bool rows_and_cols) {
   const Eigen::Matrix3d& C = scatter;
   const double c2 = C.trace();
   const double c1 = C(0, 0) * C(1, 1) - C(0, 1) * C(0, 1) + C(0, 0) * C(2, 2) -
                     C(0, 2) * C(0, 2) + C(1, 1) * C(2, 2) - C(1, 2) * C(1, 2);
   const double c0 = C.determinant();
-  double l2 = 0.0;
-  for (int i = 0; i < 3; ++i) l2 = std::max(l2, C.row(i).cwiseAbs().sum());
-  if (!(l2 > 0)) return Eigen::Matrix3d::Zero();
-  for (int it = 0; it < 100; ++it) {  // a double root halves the gap per step
-    const double p = ((l2 - c2) * l2 + c1) * l2 - c0;
-    const double dp = (3.0 * l2 - 2.0 * c2) * l2 + c1;
-    if (!(p > 0 && dp > 0)) break;
-    const double step = p / dp;
-    l2 -= step;
-    if (step <= 1e-12 * l2) break;
+  if (!(c2 > 0)) return Eigen::Matrix3d::Zero();
+  double l0 = 0.0;
+  for (int it = 0; it < 12; ++it) {
+    const double p = ((l0 - c2) * l0 + c1) * l0 - c0;  // <= 0 below the root
+    const double dp = (3.0 * l0 - 2.0 * c2) * l0 + c1;
+    if (!(p < 0 && dp > 0)) break;
+    const double step = -p / dp;
+    l0 += step;
+    if (step <= 1e-12 * c2) break;
   }
-  const double half = 0.5 * (c2 - l2);  // the mean of the two others
-  const double l1 = half + std::sqrt(std::max(half * half - c0 / l2, 0.0));
-  const double l0 = c2 - l2 - l1;
+  const double half = 0.5 * (c2 - l0);  // the mean of the two others
+  const double product = c1 - l0 * (c2 - l0);
+  const double root = std::sqrt(std::max(half * half - product, 0.0));
+  const double l1 = half - root, l2 = half + root;
+  if (!(l2 > 0)) return Eigen::Matrix3d::Zero();
   const double thin = l2 / 9.0;
   if (!(l1 < thin)) {
     if (!(l0 < thin)) return Eigen::Matrix3d::Zero();  // a blob
@@ -108,25 +112,51 @@ struct Candidate {
   int col = 0;
 };
 
-/// The shape of the neighbours of `p` among `candidates` (those within sqrt(r2), `p` included):
-/// their offsets from `p` are summed in one pass, and the scatter about their mean is
-/// outer - sum sum^T / count (offsets within the radius keep the digits that absolute positions
-/// of a distant scan would lose).
-Eigen::Matrix3d ShapeAmong(const std::vector<Candidate>& candidates, const Eigen::Vector3d& p,
+/// ShapePoints' buffers, kept by each thread.
+struct ShapeScratch {
+  std::vector<int> voxel_of, start, order;
+  std::vector<Eigen::Vector3i> keys;
+  std::vector<Candidate> candidates;
+  std::vector<Eigen::Matrix3d> shape_of;
+};
+
+/// 2^16 bits, one per hash of a voxel key: a clear bit means the voxel is not occupied.
+class OccupancyBits {
+ public:
+  void Set(const Eigen::Vector3i& key) {
+    bits_[Bit(key) >> 6] |= std::uint64_t{1} << (Bit(key) & 63);
+  }
+  bool MaybeSet(const Eigen::Vector3i& key) const {
+    return (bits_[Bit(key) >> 6] >> (Bit(key) & 63)) & 1u;
+  }
+
+ private:
+  static std::uint32_t Bit(const Eigen::Vector3i& key) {
+    const std::uint32_t h = static_cast<std::uint32_t>(key.x()) * 73856093u ^
+                            static_cast<std::uint32_t>(key.y()) * 19349669u ^
+                            static_cast<std::uint32_t>(key.z()) * 83492791u;
+    return (h * 2654435769u) >> 16;
+  }
+  std::uint64_t bits_[1024] = {};
+};
+
+/// The shape of the neighbours of `point` among `candidates` (those within sqrt(r2); the point
+/// is one of them): their offsets from the point are summed in one pass, and the scatter about
+/// their mean is outer - sum sum^T / count (offsets within the radius keep the digits that
+/// absolute positions of a distant scan would lose).
+Eigen::Matrix3d ShapeAmong(const std::vector<Candidate>& candidates, const ScanPoint& point,
                            double r2) {
-  int count = 0, first_row = 0, first_col = 0;
-  bool rows = false, cols = false;
+  const Eigen::Vector3d& p = point.position;
+  int count = 0;
+  bool rows = false, cols = false;  // neighbours off the point's row, column
   Eigen::Vector3d sum = Eigen::Vector3d::Zero();
   double xx = 0, xy = 0, xz = 0, yy = 0, yz = 0, zz = 0;
   for (const Candidate& q : candidates) {
     const Eigen::Vector3d d = q.position - p;
     if (d.squaredNorm() > r2) continue;
-    if (count++ == 0) {
-      first_row = q.row;
-      first_col = q.col;
-    }
-    rows = rows || q.row != first_row;
-    cols = cols || q.col != first_col;
+    ++count;
+    rows = rows || q.row != point.row;
+    cols = cols || q.col != point.col;
     sum += d;
     xx += d.x() * d.x();
     xy += d.x() * d.y();
@@ -145,11 +175,23 @@ Eigen::Matrix3d ShapeAmong(const std::vector<Candidate>& candidates, const Eigen
 }  // namespace
 
 std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, double radius) {
-  // The points bucketed by voxel of edge `radius` (counting sort, input order kept in a bucket).
+  // Buffers kept by the thread across scans: allocated afresh they would be mapped and faulted
+  // in page by page on every scan.
+  thread_local ShapeScratch scratch;
+  std::vector<int>& voxel_of = scratch.voxel_of;
+  std::vector<int>& start = scratch.start;
+  std::vector<int>& order = scratch.order;
+  std::vector<Eigen::Vector3i>& keys = scratch.keys;  // per voxel
+  std::vector<Candidate>& candidates = scratch.candidates;
+  std::vector<Eigen::Matrix3d>& shape_of = scratch.shape_of;
+  // The points bucketed by voxel of edge `radius` (counting sort, input order kept in a bucket),
+  // and a bitmap of occupied voxels by hash: most of a voxel's 26 neighbours are empty, and the
+  // bitmap, small enough to stay in the first-level cache, turns them away without a probe.
   VoxelIndex index(points.size() / 2);
-  std::vector<int> voxel_of(points.size());
-  std::vector<int> start;
-  std::vector<Eigen::Vector3i> keys;  // per voxel
+  OccupancyBits occupied;
+  voxel_of.resize(points.size());
+  start.clear();
+  keys.clear();
   for (std::size_t i = 0; i < points.size(); ++i) {
     bool inserted = false;
     const Eigen::Vector3i key = VoxelOf(points[i].position, radius);
@@ -157,6 +199,7 @@ std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, doubl
     if (inserted) {
       start.push_back(0);
       keys.push_back(key);
+      occupied.Set(key);
     }
     ++start[static_cast<std::size_t>(voxel_of[i])];
   }
@@ -167,7 +210,7 @@ std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, doubl
     sum += count;
   }
   start.push_back(sum);
-  std::vector<int> order(points.size());
+  order.resize(points.size());
   {
     std::vector<int> fill(start.begin(), start.end() - 1);
     for (std::size_t i = 0; i < points.size(); ++i) {
@@ -178,16 +221,18 @@ std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, doubl
   // Voxel by voxel: the points of the 27 voxels around one are gathered once for all of its
   // points. The neighbours of a point keep the order of the candidates (voxel offsets, then input
   // order), so each shape is the same whatever order the points are taken in.
-  std::vector<Eigen::Matrix3d> shape_of(points.size());
-  std::vector<Candidate> candidates;
+  shape_of.resize(points.size());
   const double r2 = radius * radius;
+  std::size_t num_shaped = 0;
   for (std::size_t v = 0; v < keys.size(); ++v) {
     const Eigen::Vector3i& key = keys[v];
     candidates.clear();
     for (int dx = -1; dx <= 1; ++dx) {
       for (int dy = -1; dy <= 1; ++dy) {
         for (int dz = -1; dz <= 1; ++dz) {
-          const int u = index.Find(key + Eigen::Vector3i(dx, dy, dz));
+          const Eigen::Vector3i neighbour = key + Eigen::Vector3i(dx, dy, dz);
+          if (!occupied.MaybeSet(neighbour)) continue;
+          const int u = index.Find(neighbour);
           if (u < 0) continue;
           for (int k = start[static_cast<std::size_t>(u)]; k < start[static_cast<std::size_t>(u) + 1];
                ++k) {
@@ -199,11 +244,12 @@ std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, doubl
     }
     for (int k = start[v]; k < start[v + 1]; ++k) {
       const std::size_t i = static_cast<std::size_t>(order[static_cast<std::size_t>(k)]);
-      shape_of[i] = ShapeAmong(candidates, points[i].position, r2);
+      shape_of[i] = ShapeAmong(candidates, points[i], r2);
+      num_shaped += shape_of[i].isZero() ? 0 : 1;
     }
   }
   std::vector<ShapedPoint> shaped;
-  shaped.reserve(points.size());
+  shaped.reserve(num_shaped);
   for (std::size_t i = 0; i < points.size(); ++i) {
     if (!shape_of[i].isZero()) shaped.push_back({points[i].position, shape_of[i]});
   }
@@ -383,15 +429,17 @@ const LocalVoxelMap::MapPoint* LocalVoxelMap::NearestWithin(const Eigen::Vector3
   // than the best pair so far (exact: only points that cannot win are skipped).
   const Eigen::Vector3i key = Key(q);
   const Eigen::Vector3d offset = q - key.cast<double>() * voxel_;  // in [0, voxel)^3
+  // The squared gap from q to the voxel before, at and after its own along each axis.
+  double gap2[3][3];
+  for (int a = 0; a < 3; ++a) {
+    gap2[a][0] = offset[a] * offset[a];
+    gap2[a][1] = 0.0;
+    gap2[a][2] = (voxel_ - offset[a]) * (voxel_ - offset[a]);
+  }
   const MapPoint* best = nullptr;
   double best_d2 = max_distance2;
   auto visit = [&](int dx, int dy, int dz) {
-    double box2 = 0.0;
-    const int d[3] = {dx, dy, dz};
-    for (int a = 0; a < 3; ++a) {
-      const double gap = d[a] < 0 ? offset[a] : (d[a] > 0 ? voxel_ - offset[a] : 0.0);
-      box2 += gap * gap;
-    }
+    const double box2 = (gap2[0][dx + 1] + gap2[1][dy + 1]) + gap2[2][dz + 1];
     if (box2 > best_d2) return;
     const int v = index_.Find(key + Eigen::Vector3i(dx, dy, dz));
     if (v < 0) return;
@@ -407,7 +455,9 @@ const LocalVoxelMap::MapPoint* LocalVoxelMap::NearestWithin(const Eigen::Vector3
   };
   visit(0, 0, 0);
   for (int dx = -1; dx <= 1; ++dx) {
+    if (gap2[0][dx + 1] > best_d2) continue;  // every voxel of this slab is too far
     for (int dy = -1; dy <= 1; ++dy) {
+      if (gap2[0][dx + 1] + gap2[1][dy + 1] > best_d2) continue;
       for (int dz = -1; dz <= 1; ++dz) {
         if (dx != 0 || dy != 0 || dz != 0) visit(dx, dy, dz);
       }
