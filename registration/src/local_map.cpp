@@ -120,26 +120,6 @@ struct ShapeScratch {
   std::vector<Eigen::Matrix3d> shape_of;
 };
 
-/// 2^16 bits, one per hash of a voxel key: a clear bit means the voxel is not occupied.
-class OccupancyBits {
- public:
-  void Set(const Eigen::Vector3i& key) {
-    bits_[Bit(key) >> 6] |= std::uint64_t{1} << (Bit(key) & 63);
-  }
-  bool MaybeSet(const Eigen::Vector3i& key) const {
-    return (bits_[Bit(key) >> 6] >> (Bit(key) & 63)) & 1u;
-  }
-
- private:
-  static std::uint32_t Bit(const Eigen::Vector3i& key) {
-    const std::uint32_t h = static_cast<std::uint32_t>(key.x()) * 73856093u ^
-                            static_cast<std::uint32_t>(key.y()) * 19349669u ^
-                            static_cast<std::uint32_t>(key.z()) * 83492791u;
-    return (h * 2654435769u) >> 16;
-  }
-  std::uint64_t bits_[1024] = {};
-};
-
 /// The shape of the neighbours of `point` among `candidates` (those within sqrt(r2); the point
 /// is one of them): their offsets from the point are summed in one pass, and the scatter about
 /// their mean is outer - sum sum^T / count (offsets within the radius keep the digits that
@@ -188,7 +168,7 @@ std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, doubl
   // and a bitmap of occupied voxels by hash: most of a voxel's 26 neighbours are empty, and the
   // bitmap, small enough to stay in the first-level cache, turns them away without a probe.
   VoxelIndex index(points.size() / 2);
-  OccupancyBits occupied;
+  VoxelBitmap<16> occupied;  // 8 KiB
   voxel_of.resize(points.size());
   start.clear();
   keys.clear();
@@ -374,6 +354,7 @@ std::size_t LocalVoxelMap::size() const {
 
 void LocalVoxelMap::Clear() {
   index_.Reset(0);
+  occupied_.Clear();
   keys_.clear();
   cells_.clear();
 }
@@ -389,6 +370,7 @@ void LocalVoxelMap::Insert(const std::vector<ShapedPoint>& points_sensor,
     if (inserted) {
       keys_.push_back(key);
       cells_.emplace_back();
+      occupied_.Set(key);
     }
     std::vector<MapPoint>& cell = cells_[static_cast<std::size_t>(v)];
     if (static_cast<int>(cell.size()) >= max_points_) continue;
@@ -411,9 +393,11 @@ void LocalVoxelMap::Insert(const std::vector<ShapedPoint>& points_sensor,
   keys_.resize(kept);
   cells_.resize(kept);
   index_.Reset(kept);
+  occupied_.Clear();
   for (const Eigen::Vector3i& key : keys_) {
     bool inserted = false;
     index_.Insert(key, &inserted);
+    occupied_.Set(key);
   }
 }
 
@@ -441,7 +425,9 @@ const LocalVoxelMap::MapPoint* LocalVoxelMap::NearestWithin(const Eigen::Vector3
   auto visit = [&](int dx, int dy, int dz) {
     const double box2 = (gap2[0][dx + 1] + gap2[1][dy + 1]) + gap2[2][dz + 1];
     if (box2 > best_d2) return;
-    const int v = index_.Find(key + Eigen::Vector3i(dx, dy, dz));
+    const Eigen::Vector3i neighbour = key + Eigen::Vector3i(dx, dy, dz);
+    if (!occupied_.MaybeSet(neighbour)) return;
+    const int v = index_.Find(neighbour);
     if (v < 0) return;
     for (const MapPoint& m : cells_[static_cast<std::size_t>(v)]) {
       const double d2 = (m.position - q).squaredNorm();

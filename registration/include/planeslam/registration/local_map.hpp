@@ -131,6 +131,7 @@ class LocalVoxelMap {
   double voxel_;
   int max_points_;
   VoxelIndex index_;                         ///< voxel -> index into keys_ and cells_
+  VoxelBitmap<20> occupied_;                 ///< the voxels of index_ (128 KiB)
   std::vector<Eigen::Vector3i> keys_;        ///< per voxel, in order of creation
   std::vector<std::vector<MapPoint>> cells_;  ///< per voxel, its points
 };

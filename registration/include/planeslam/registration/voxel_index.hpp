@@ -6,6 +6,7 @@
 /// per entry and chases a pointer per look-up: the local map's neighbour search does 27 look-ups
 /// per query.
 #include <Eigen/Core>
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -17,6 +18,34 @@ inline int FloorToInt(double x) {
   const int truncated = static_cast<int>(x);
   return truncated - (static_cast<double>(truncated) > x ? 1 : 0);
 }
+
+/// A bitmap of occupied voxels, one bit per hash of the key (2^kLog2Bits bits): a clear bit
+/// means the voxel is not occupied, a set one that it may be. Small enough to stay in a near
+/// cache where a hash table of many voxels is not, it turns most look-ups of empty voxels away
+/// before they probe the table.
+template <int kLog2Bits>
+class VoxelBitmap {
+ public:
+  VoxelBitmap() : words_(std::size_t{1} << (kLog2Bits - 6), 0) {}
+  void Set(const Eigen::Vector3i& key) {
+    const std::uint32_t b = Bit(key);
+    words_[b >> 6] |= std::uint64_t{1} << (b & 63);
+  }
+  bool MaybeSet(const Eigen::Vector3i& key) const {
+    const std::uint32_t b = Bit(key);
+    return ((words_[b >> 6] >> (b & 63)) & 1u) != 0;
+  }
+  void Clear() { std::fill(words_.begin(), words_.end(), 0); }
+
+ private:
+  static std::uint32_t Bit(const Eigen::Vector3i& key) {
+    const std::uint32_t h = static_cast<std::uint32_t>(key.x()) * 73856093u ^
+                            static_cast<std::uint32_t>(key.y()) * 19349669u ^
+                            static_cast<std::uint32_t>(key.z()) * 83492791u;
+    return (h * 2654435769u) >> (32 - kLog2Bits);
+  }
+  std::vector<std::uint64_t> words_;
+};
 
 class VoxelIndex {
  public:
