@@ -12,6 +12,7 @@
 #include <tuple>
 
 #include "plane_residual.hpp"
+#include "planeslam/datasets/errors.hpp"
 
 namespace planeslam::registration {
 
@@ -334,12 +335,20 @@ class Verifier {
     match_data_.resize(cands.size());
     usable_.resize(cands.size());
     for (std::size_t k = 0; k < cands.size(); ++k) {
+      candidate_of_[{cands[k].i, cands[k].j, cands[k].flip}] = static_cast<int>(k);
       usable_[k] = internal::MakeMatchData(prev_, curr_, ToMatch(static_cast<int>(k)), rc_,
                                            &match_data_[k]);
     }
   }
 
   PlaneMatch ToMatch(int k) const { return PlaneMatch{cands_[k].i, cands_[k].j, cands_[k].flip}; }
+
+  /// The candidate a match came from (every match here is one of them).
+  int CandidateOf(const PlaneMatch& m) const {
+    const auto it = candidate_of_.find({m.prev, m.curr, m.flip_curr});
+    PLANESLAM_CHECK(it != candidate_of_.end(), "a match that is no candidate");
+    return it->second;
+  }
 
   /// The matches of a clique, in the clique's order.
   std::vector<PlaneMatch> CliqueMatches(const std::vector<int>& clique) const {
@@ -409,8 +418,15 @@ class Verifier {
     for (const PlaneMatch& m : matches) key.emplace_back(m.prev, m.curr, m.flip_curr);
     auto it = solved_.find(key);
     if (it == solved_.end()) {
-      it = solved_.emplace(std::move(key), RegisterPlanes(prev_, curr_, matches, prior_, rc_))
-               .first;
+      // The matches' residual forms were made once per candidate (RegisterPlanes would make
+      // them again for every subset).
+      std::vector<internal::MatchData> data;
+      data.reserve(matches.size());
+      for (const PlaneMatch& m : matches) {
+        const std::size_t k = static_cast<std::size_t>(CandidateOf(m));
+        if (usable_[k]) data.push_back(match_data_[k]);
+      }
+      it = solved_.emplace(std::move(key), internal::RegisterMatchData(data, prior_, rc_)).first;
     }
     return it->second;
   }
@@ -465,6 +481,7 @@ class Verifier {
   const RegistrationConfig& rc_;
   std::vector<internal::MatchData> match_data_;  ///< per candidate
   std::vector<char> usable_;                     ///< per candidate: match_data_ is valid
+  std::map<std::tuple<int, int, bool>, int> candidate_of_;  ///< (prev, curr, flip) -> candidate
   mutable std::map<std::vector<std::tuple<int, int, bool>>, RegistrationResult> solved_;
 };
 

@@ -1,5 +1,6 @@
 #include "planeslam/registration/plane_registration.hpp"
 
+#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 #include <algorithm>
@@ -160,6 +161,11 @@ Linearized Linearize(const MatchData& m, const Eigen::Matrix3d& R, const Eigen::
   // the weights, the exact solution does not depend on it.
   sr += Eigen::Matrix3d::Identity() * 1e-18;
   lin.cov = sr;
+  if (std::min(fn2, fd2) > 1e-12) {
+    // The floors keep every eigenvalue of sr at least 2 min(fn2, fd2): a Cholesky inverse.
+    lin.W = sr.llt().solve(Eigen::Matrix3d::Identity());
+    return lin;
+  }
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
   es.computeDirect(sr);
   const Eigen::Vector3d ev = es.eigenvalues().cwiseMax(1e-18);
@@ -449,9 +455,14 @@ RegistrationResult RegisterPlanes(const std::vector<detection::Plane>& prev,
                                   const std::vector<detection::Plane>& curr,
                                   const std::vector<PlaneMatch>& matches, const MotionPrior& prior,
                                   const RegistrationConfig& config) {
+  return internal::RegisterMatchData(CollectMatchData(prev, curr, matches, config), prior, config);
+}
+
+RegistrationResult internal::RegisterMatchData(const std::vector<MatchData>& data,
+                                               const MotionPrior& prior,
+                                               const RegistrationConfig& config) {
   const Matrix6d prior_cov = SanitizedPriorCovariance(prior);
   const Pose prior_pose = SanitizedPriorPose(prior);
-  const std::vector<MatchData> data = CollectMatchData(prev, curr, matches, config);
   if (data.empty()) return PriorOnlyResult(prior_pose, prior_cov);
 
   Eigen::Matrix3d R = prior_pose.linear();

@@ -35,4 +35,9 @@ bool MakeMatchData(const std::vector<detection::Plane>& prev,
 Linearized Linearize(const MatchData& m, const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
                      const RegistrationConfig& config);
 
+/// RegisterPlanes on matches already in residual form (those RegisterPlanes would keep, in the
+/// order of its matches): the association solves many subsets of one candidate set.
+RegistrationResult RegisterMatchData(const std::vector<MatchData>& data, const MotionPrior& prior,
+                                     const RegistrationConfig& config);
+
 }  // namespace planeslam::registration::internal
