@@ -4,6 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+
 #include <random>
 
 #include "registration/corridor_scene.hpp"
@@ -184,6 +187,74 @@ TEST(LocalMap, RecoversMotionAlongASingleWallFromALidarScan) {
     }
   }
   EXPECT_LE(failures, 1) << "of " << draws << " draws";  // budget: one draw in eight
+}
+
+TEST(LocalMap, ShapesAgreeWithAnIterativeEigensolverOverRandomNeighbourhoods) {
+  // Random surfaces (noisy discs), edges (noisy segments spanning rows and columns) and blobs at
+  // random orientations and far from the origin: each point's shape against the projector built
+  // from Eigen's iterative solver on the same neighbours. Budget: no disagreement in 600 draws.
+  std::mt19937 rng(23);
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  const double radius = 0.5;
+  int surfaces = 0, edges = 0, blobs = 0;
+  for (int draw = 0; draw < 600; ++draw) {
+    const Eigen::Matrix3d R =
+        Eigen::Quaterniond(gauss(rng), gauss(rng), gauss(rng), gauss(rng)).normalized()
+            .toRotationMatrix();
+    const Eigen::Vector3d origin(40.0 * gauss(rng), 40.0 * gauss(rng), 5.0 * gauss(rng));
+    const int kind = draw % 3;
+    std::vector<ScanPoint> points;
+    for (int i = 0; i < 40; ++i) {
+      Eigen::Vector3d local(0.2 * gauss(rng), 0.2 * gauss(rng), 0.2 * gauss(rng));
+      if (kind == 0) local.z() *= 0.02;                    // surface
+      if (kind == 1) local.tail<2>() *= 0.02;              // edge along x
+      points.push_back({origin + R * local, i % 7, i / 7});  // rows and columns vary
+    }
+    const std::vector<ShapedPoint> shaped = ShapePoints(points, radius);
+    std::size_t next = 0;
+    for (const ScanPoint& p : points) {
+      std::vector<const ScanPoint*> near;
+      for (const ScanPoint& q : points) {
+        if ((q.position - p.position).squaredNorm() <= radius * radius) near.push_back(&q);
+      }
+      Eigen::Matrix3d expected = Eigen::Matrix3d::Zero();
+      if (near.size() >= 5) {
+        Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+        bool rows = false, cols = false;
+        for (const ScanPoint* q : near) {
+          mean += q->position / static_cast<double>(near.size());
+          rows = rows || q->row != p.row;
+          cols = cols || q->col != p.col;
+        }
+        Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+        for (const ScanPoint* q : near) {
+          scatter += (q->position - mean) * (q->position - mean).transpose();
+        }
+        const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(scatter);
+        for (int k = 0; k < 2; ++k) {
+          if (es.eigenvalues()(k) < es.eigenvalues()(2) / 9.0) {
+            expected += es.eigenvectors().col(k) * es.eigenvectors().col(k).transpose();
+          }
+        }
+        if (expected.trace() > 1.5 && !(rows && cols)) expected.setZero();
+      }
+      if (expected.isZero()) {
+        ++blobs;
+        ASSERT_TRUE(next >= shaped.size() || shaped[next].position != p.position) << draw;
+        continue;
+      }
+      ASSERT_LT(next, shaped.size()) << draw;
+      ASSERT_EQ(shaped[next].position, p.position) << draw;
+      EXPECT_LT((shaped[next].shape - expected).norm(), 1e-9) << draw;
+      (expected.trace() > 1.5 ? edges : surfaces) += 1;
+      ++next;
+    }
+    EXPECT_EQ(next, shaped.size()) << draw;
+  }
+  EXPECT_GT(surfaces, 1000);
+  EXPECT_GT(edges, 1000);
+  EXPECT_GT(blobs, 1000);
 }
 
 TEST(LocalMap, CompactShapedPointsKeepPositionsAndShapes) {

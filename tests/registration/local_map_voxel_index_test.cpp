@@ -1,4 +1,5 @@
-// The local map's voxel hash against std::unordered_map on random keys, through growth.
+// The local map's voxel hash against std::unordered_map on random keys, through growth, and
+// its bitmap of occupied voxels.
 #include "planeslam/registration/voxel_index.hpp"
 
 #include <gtest/gtest.h>
@@ -6,6 +7,7 @@
 #include <map>
 #include <random>
 #include <tuple>
+#include <vector>
 
 namespace planeslam::registration {
 namespace {
@@ -35,6 +37,31 @@ TEST(LocalMapVoxelIndex, AgreesWithAStandardMapOnRandomKeys) {
     EXPECT_EQ(index.size(), 0);
     EXPECT_EQ(index.Find({0, 0, 0}), -1);
   }
+}
+
+TEST(LocalMapVoxelIndex, BitmapHasNoFalseClearsAndFewFalseSets) {
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int> coord(-100000, 100000);
+  VoxelBitmap<16> bitmap;
+  std::vector<Eigen::Vector3i> set;
+  for (int i = 0; i < 3000; ++i) {
+    set.emplace_back(coord(rng), coord(rng), coord(rng));
+    bitmap.Set(set.back());
+  }
+  for (const Eigen::Vector3i& key : set) ASSERT_TRUE(bitmap.MaybeSet(key));
+  // Keys never set: about 3000 / 65536 = 4.6 % read as set; neighbours of set keys (what the
+  // searches ask for) must not collide more than random keys do.
+  int false_sets = 0, trials = 0;
+  for (const Eigen::Vector3i& key : set) {
+    for (const Eigen::Vector3i& step : {Eigen::Vector3i(1, 0, 0), Eigen::Vector3i(0, 1, 0),
+                                        Eigen::Vector3i(0, 0, 1), Eigen::Vector3i(1, 1, 1)}) {
+      ++trials;
+      false_sets += bitmap.MaybeSet(key + step) ? 1 : 0;
+    }
+  }
+  EXPECT_LT(false_sets, 0.08 * trials);
+  bitmap.Clear();
+  for (const Eigen::Vector3i& key : set) ASSERT_FALSE(bitmap.MaybeSet(key));
 }
 
 }  // namespace
