@@ -19,6 +19,13 @@ inline int FloorToInt(double x) {
   return truncated - (static_cast<double>(truncated) > x ? 1 : 0);
 }
 
+/// The spatial hash of Teschner et al. 2003 of a voxel key, in 32 bits.
+inline std::uint32_t SpatialHash(const Eigen::Vector3i& key) {
+  return static_cast<std::uint32_t>(key.x()) * 73856093u ^
+         static_cast<std::uint32_t>(key.y()) * 19349669u ^
+         static_cast<std::uint32_t>(key.z()) * 83492791u;
+}
+
 /// A bitmap of occupied voxels, one bit per hash of the key (2^kLog2Bits bits): a clear bit
 /// means the voxel is not occupied, a set one that it may be. Small enough to stay in a near
 /// cache where a hash table of many voxels is not, it turns most look-ups of empty voxels away
@@ -39,10 +46,7 @@ class VoxelBitmap {
 
  private:
   static std::uint32_t Bit(const Eigen::Vector3i& key) {
-    const std::uint32_t h = static_cast<std::uint32_t>(key.x()) * 73856093u ^
-                            static_cast<std::uint32_t>(key.y()) * 19349669u ^
-                            static_cast<std::uint32_t>(key.z()) * 83492791u;
-    return (h * 2654435769u) >> (32 - kLog2Bits);
+    return (SpatialHash(key) * 2654435769u) >> (32 - kLog2Bits);
   }
   std::vector<std::uint64_t> words_;
 };
@@ -100,12 +104,7 @@ class VoxelIndex {
   };
 
   std::size_t Home(const Eigen::Vector3i& v) const {
-    const std::uint64_t h = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(v.x()) *
-                                                        73856093u) ^
-                             static_cast<std::uint64_t>(static_cast<std::uint32_t>(v.y()) *
-                                                        19349669u) ^
-                             static_cast<std::uint64_t>(static_cast<std::uint32_t>(v.z()) *
-                                                        83492791u)) ^
+    const std::uint64_t h = static_cast<std::uint64_t>(SpatialHash(v)) ^
                             (static_cast<std::uint64_t>(static_cast<std::uint32_t>(v.z())) << 32);
     return static_cast<std::size_t>((h * 0x9E3779B97F4A7C15ull) >> shift_);
   }
