@@ -7,6 +7,7 @@
 #include <fstream>
 #include <functional>
 #include <future>
+#include <iterator>
 #include <limits>
 #include <utility>
 
@@ -153,12 +154,6 @@ class PackedKeySet {
       }
     }
   }
-  bool Contains(std::uint64_t key) const {
-    for (std::size_t i = Slot(key);; i = (i + 1) & mask_) {
-      if (slots_[i] == key) return true;
-      if (slots_[i] == kEmpty) return false;
-    }
-  }
   /// The keys in ascending order (neighbouring cells next to each other, so applying them in this
   /// order walks the octree with its upper levels in cache); empties the set. The keys are
   /// compacted to the front of the table and sorted with its free second half as the buffer
@@ -206,6 +201,240 @@ struct ScanUpdate {
   std::size_t points = 0;
 };
 
+/// One ray walked cell by cell exactly as octomap::OcTree::computeRayKeys(origin, end) walks it:
+/// the same cells in the same order, with its arithmetic (Amanatides and Woo's 3D DDA).
+class RayWalk {
+ public:
+  /// Sets up the walk and returns the first cell (the sensor's) in *first; false when the ray has
+  /// no cells (a coordinate outside the tree, where computeRayKeys fails, or both ends in one cell).
+  bool Start(const octomap::OcTree& keys, const octomap::point3d& origin,
+             const octomap::point3d& end, octomap::OcTreeKey* first) {
+    if (!keys.coordToKeyChecked(origin, key_) || !keys.coordToKeyChecked(end, key_end_)) {
+      return false;
+    }
+    if (key_ == key_end_) return false;
+    *first = key_;
+    octomap::point3d direction = end - origin;
+    length_ = static_cast<float>(direction.norm());
+    direction /= length_;
+    const double resolution = keys.getResolution();
+    for (int i = 0; i < 3; ++i) {
+      step_[i] = direction(i) > 0.0 ? 1 : (direction(i) < 0.0 ? -1 : 0);
+      if (step_[i] != 0) {
+        double border = keys.keyToCoord(key_[i]);
+        border += static_cast<float>(step_[i] * resolution * 0.5);
+        t_max_[i] = (border - origin(i)) / direction(i);
+        t_delta_[i] = resolution / std::fabs(direction(i));
+      } else {
+        t_max_[i] = t_delta_[i] = std::numeric_limits<double>::max();
+      }
+    }
+    axis_ = NextAxis();
+    return true;
+  }
+  /// Steps into the next cell and returns it in *cell; false when the walk has ended.
+  bool Advance(octomap::OcTreeKey* cell) {
+    key_[axis_] = static_cast<octomap::key_type>(key_[axis_] + step_[axis_]);
+    t_max_[axis_] += t_delta_[axis_];
+    if (key_ == key_end_) return false;
+    axis_ = NextAxis();
+    // Past the end point without reaching its cell (rounding): the walk stops, as octomap's does.
+    if (t_max_[axis_] > length_) return false;
+    *cell = key_;
+    return true;
+  }
+
+ private:
+  // The axis whose cell border comes next, with octomap's tie-breaking; its t_max is the smallest,
+  // the distance at which the ray leaves the cell it is in. Selects, not branches: the axis
+  // changes unpredictably along a ray.
+  int NextAxis() const {
+    const int first = t_max_[0] < t_max_[1] ? 0 : 1;
+    return t_max_[first] < t_max_[2] ? first : 2;
+  }
+
+  octomap::OcTreeKey key_, key_end_;
+  int step_[3] = {0, 0, 0};
+  double t_max_[3] = {0, 0, 0}, t_delta_[3] = {0, 0, 0};
+  float length_ = 0;
+  int axis_ = 0;
+};
+
+/// Calls visit(key) for every cell computeRayKeys(origin, end) returns, for every end in `ends`
+/// (each cell as often as it lies on a ray, in no particular order). A walk is a chain of
+/// dependent steps, so kLanes rays are walked side by side for the processor to overlap them.
+template <typename Visit>
+void WalkRays(const octomap::OcTree& keys, const octomap::point3d& origin,
+              const std::vector<octomap::point3d>& ends, Visit&& visit) {
+  constexpr int kLanes = 4;
+  RayWalk lanes[kLanes];
+  bool active[kLanes] = {};
+  std::size_t next = 0;
+  octomap::OcTreeKey cell;
+  const auto start = [&](int lane) {
+    while (next < ends.size()) {
+      if (lanes[lane].Start(keys, origin, ends[next++], &cell)) {
+        visit(cell);
+        return true;
+      }
+    }
+    return false;
+  };
+  int running = 0;
+  for (int lane = 0; lane < kLanes; ++lane) running += active[lane] = start(lane);
+  while (running > 0) {
+    for (int lane = 0; lane < kLanes; ++lane) {
+      if (!active[lane]) continue;
+      if (lanes[lane].Advance(&cell)) {
+        visit(cell);
+      } else if (!(active[lane] = start(lane))) {
+        --running;
+      }
+    }
+  }
+}
+
+/// A scan's free cells as one bit per cell of the box of keys its rays span. Marking a cell is a
+/// bit set where a hash set needs a probe into a table of millions of keys (most rays of a scan
+/// cross the same cells near the sensor), and reading the bits row by row gives the keys in
+/// ascending packed order without a sort. Rows run along x and are padded to whole words.
+class CellBitmap {
+ public:
+  /// Largest bitmap; a scan whose box needs more (far points and no max_range, rays sparse in
+  /// the box) goes through a hash set instead.
+  static constexpr std::uint64_t kMaxBits = std::uint64_t{1} << 30;
+
+  /// Sizes the bitmap to the box [lo, hi] (inclusive) and clears it; false when it is too large.
+  bool Reset(const octomap::OcTreeKey& lo, const octomap::OcTreeKey& hi) {
+    for (int a = 0; a < 3; ++a) {
+      lo_[a] = lo[a];
+      size_[a] = std::uint32_t{hi[a]} - lo[a] + 1;
+    }
+    row_words_ = (size_[0] + 63) / 64;
+    const std::uint64_t words = std::uint64_t{row_words_} * size_[1] * size_[2];
+    if (words * 64 > kMaxBits) return false;
+    words_.assign(words, 0);
+    outside_.clear();
+    return true;
+  }
+  void Set(const octomap::OcTreeKey& key) {
+    std::uint64_t bit;
+    if (Bit(key, &bit)) words_[bit >> 6] |= std::uint64_t{1} << (bit & 63);
+    else outside_.push_back(Pack(key));
+  }
+  void Clear(const octomap::OcTreeKey& key) {
+    std::uint64_t bit;
+    if (Bit(key, &bit)) words_[bit >> 6] &= ~(std::uint64_t{1} << (bit & 63));
+  }
+  /// The set cells, ascending. Cells outside the box (a ray rounding past its end cell) are
+  /// merged in; none of them is an end cell, since the box holds every end cell.
+  std::vector<std::uint64_t> SortedKeys() const {
+    std::size_t count = 0;
+    for (std::uint64_t word : words_) count += static_cast<std::size_t>(__builtin_popcountll(word));
+    std::vector<std::uint64_t> keys;
+    keys.reserve(count + outside_.size());
+    std::size_t w = 0;
+    for (std::uint32_t z = 0; z < size_[2]; ++z) {
+      for (std::uint32_t y = 0; y < size_[1]; ++y) {
+        const std::uint64_t row = std::uint64_t{lo_[1] + y} << 16 | std::uint64_t{lo_[2] + z} << 32;
+        for (std::uint32_t rw = 0; rw < row_words_; ++rw, ++w) {
+          for (std::uint64_t bits = words_[w]; bits != 0; bits &= bits - 1) {
+            keys.push_back(row | (lo_[0] + rw * 64 + static_cast<unsigned>(__builtin_ctzll(bits))));
+          }
+        }
+      }
+    }
+    if (!outside_.empty()) {
+      std::vector<std::uint64_t> extra = outside_;
+      std::sort(extra.begin(), extra.end());
+      extra.erase(std::unique(extra.begin(), extra.end()), extra.end());
+      std::vector<std::uint64_t> merged;
+      merged.reserve(keys.size() + extra.size());
+      std::merge(keys.begin(), keys.end(), extra.begin(), extra.end(), std::back_inserter(merged));
+      keys.swap(merged);
+    }
+    return keys;
+  }
+
+ private:
+  bool Bit(const octomap::OcTreeKey& key, std::uint64_t* bit) const {
+    std::uint32_t c[3];
+    for (int a = 0; a < 3; ++a) {
+      c[a] = static_cast<std::uint32_t>(key[a]) - lo_[a];  // wraps when below lo: one compare
+      if (c[a] >= size_[a]) return false;
+    }
+    *bit = (std::uint64_t{c[2]} * size_[1] + c[1]) * row_words_ * 64 + c[0];
+    return true;
+  }
+
+  std::uint32_t lo_[3] = {0, 0, 0};
+  std::uint32_t size_[3] = {0, 0, 0};
+  std::uint32_t row_words_ = 0;
+  std::vector<std::uint64_t> words_;
+  std::vector<std::uint64_t> outside_;
+};
+
+/// A scan's rays: from the sensor to the centre of each end voxel, or to max_range along it.
+struct ScanRays {
+  octomap::point3d origin;
+  std::vector<octomap::point3d> ends;
+  std::vector<std::uint64_t> hits;  ///< end voxels within max_range (ascending)
+  octomap::OcTreeKey lo, hi;        ///< box of the keys of the sensor and every ray end
+};
+
+ScanRays CollectRays(const octomap::OcTree& keys, const OccupancyMapConfig& config,
+                     const std::vector<Eigen::Vector3f>& kept, const Pose& T_world_sensor) {
+  const Eigen::Matrix3f R = T_world_sensor.linear().cast<float>();
+  const Eigen::Vector3f t = T_world_sensor.translation().cast<float>();
+  ScanRays rays;
+  rays.origin = octomap::point3d(t.x(), t.y(), t.z());
+  // Discretized: one ray per end voxel, cast to the voxel's centre.
+  PackedKeySet ends;
+  for (const auto& p : kept) {
+    const Eigen::Vector3f w = R * p + t;
+    ends.Insert(Pack(keys.coordToKey(octomap::point3d(w.x(), w.y(), w.z()))));
+  }
+  const double max_range = config.max_range > 0 ? config.max_range : -1.0;
+  octomap::OcTreeKey key;
+  rays.lo = rays.hi = keys.coordToKey(rays.origin);
+  const auto extend = [&](const octomap::point3d& p) {
+    if (!keys.coordToKeyChecked(p, key)) return;
+    for (int a = 0; a < 3; ++a) {
+      rays.lo[a] = std::min(rays.lo[a], key[a]);
+      rays.hi[a] = std::max(rays.hi[a], key[a]);
+    }
+  };
+  for (std::uint64_t end_key : ends.TakeSorted()) {
+    const octomap::point3d p = keys.keyToCoord(Unpack(end_key));
+    if (max_range < 0.0 || (p - rays.origin).norm() <= max_range) {
+      if (keys.coordToKeyChecked(p, key)) rays.hits.push_back(Pack(key));
+      rays.ends.push_back(p);
+    } else {
+      const octomap::point3d direction = (p - rays.origin).normalized();
+      rays.ends.push_back(rays.origin + direction * static_cast<float>(max_range));
+    }
+    extend(rays.ends.back());
+  }
+  // Already ascending unless a centre's key differs from its voxel's (it does not at any range
+  // a tree holds); sorting makes the set operations safe regardless.
+  std::sort(rays.hits.begin(), rays.hits.end());
+  rays.hits.erase(std::unique(rays.hits.begin(), rays.hits.end()), rays.hits.end());
+  return rays;
+}
+
+/// Free cells of the rays through a hash set, for scans whose box is too large for a bitmap.
+std::vector<std::uint64_t> FreeCellsBySet(const octomap::OcTree& keys, const ScanRays& rays) {
+  PackedKeySet free_cells;
+  WalkRays(keys, rays.origin, rays.ends,
+           [&](const octomap::OcTreeKey& k) { free_cells.Insert(Pack(k)); });
+  std::vector<std::uint64_t> cells = free_cells.TakeSorted();
+  std::vector<std::uint64_t> kept;
+  kept.reserve(cells.size());
+  std::set_difference(cells.begin(), cells.end(), rays.hits.begin(), rays.hits.end(),
+                      std::back_inserter(kept));
+  return kept;
+}
+
 ScanUpdate ComputeScanUpdate(const OccupancyMapConfig& config,
                              const std::vector<Eigen::Vector3f>& points_sensor,
                              const Pose& T_world_sensor) {
@@ -219,44 +448,77 @@ ScanUpdate ComputeScanUpdate(const OccupancyMapConfig& config,
       if (p.allFinite()) kept.push_back(p);
     }
   }
-  const Eigen::Matrix3f R = T_world_sensor.linear().cast<float>();
-  const Eigen::Vector3f t = T_world_sensor.translation().cast<float>();
-  const octomap::point3d origin(t.x(), t.y(), t.z());
-  // A tree only for its key arithmetic and ray casting (no nodes are created in it).
+  // A tree only for its key arithmetic (no nodes are created in it).
   const octomap::OcTree keys(config.resolution);
-  // Discretized: one ray per end voxel, cast to the voxel's centre.
-  PackedKeySet ends;
-  for (const auto& p : kept) {
-    const Eigen::Vector3f w = R * p + t;
-    ends.Insert(Pack(keys.coordToKey(octomap::point3d(w.x(), w.y(), w.z()))));
-  }
-  const double max_range = config.max_range > 0 ? config.max_range : -1.0;
-  PackedKeySet free_cells, occupied_cells;
-  octomap::KeyRay ray;
-  for (std::uint64_t end_key : ends.TakeSorted()) {
-    const octomap::point3d p = keys.keyToCoord(Unpack(end_key));
-    octomap::point3d ray_end = p;
-    const bool in_range = max_range < 0.0 || (p - origin).norm() <= max_range;
-    if (in_range) {
-      octomap::OcTreeKey key;
-      if (keys.coordToKeyChecked(p, key)) occupied_cells.Insert(Pack(key));
-    } else {
-      const octomap::point3d direction = (p - origin).normalized();
-      ray_end = origin + direction * static_cast<float>(max_range);
-    }
-    if (keys.computeRayKeys(origin, ray_end, ray)) {
-      for (const octomap::OcTreeKey& k : ray) free_cells.Insert(Pack(k));
-    }
-  }
+  ScanRays rays = CollectRays(keys, config, kept, T_world_sensor);
   ScanUpdate update;
-  update.free_cells = free_cells.TakeSorted();
-  update.free_cells.erase(
-      std::remove_if(update.free_cells.begin(), update.free_cells.end(),
-                     [&](std::uint64_t k) { return occupied_cells.Contains(k); }),
-      update.free_cells.end());
-  update.occupied_cells = occupied_cells.TakeSorted();
+  thread_local CellBitmap bitmap;  // kept: clearing memory already mapped is cheaper than mapping it
+  if (bitmap.Reset(rays.lo, rays.hi)) {
+    WalkRays(keys, rays.origin, rays.ends, [&](const octomap::OcTreeKey& k) { bitmap.Set(k); });
+    for (std::uint64_t hit : rays.hits) bitmap.Clear(Unpack(hit));
+    update.free_cells = bitmap.SortedKeys();
+  } else {
+    update.free_cells = FreeCellsBySet(keys, rays);
+  }
+  update.occupied_cells = std::move(rays.hits);
   update.points = kept.size();
   return update;
+}
+
+/// Adds `update` to the log-odds of the leaves at `keys` (ascending), exactly as
+/// octomap::OcTree::updateNode(key, update, lazy_eval = true) does key by key: the same early
+/// abort at a clamped leaf or pruned node, the same expansion of pruned nodes, the same new nodes.
+/// Instead of descending from the root twice per key (updateNode searches first), it descends
+/// once, from the deepest node the previous key's path shares: cells in ascending order share
+/// all but their last few levels.
+void ApplyLazily(octomap::OcTree& tree, const std::vector<std::uint64_t>& keys, float update) {
+  constexpr int kDepth = 16;
+  static_assert(sizeof(octomap::key_type) * 8 == kDepth, "an OcTree key has one bit per level");
+  const float clamp_min = tree.getClampingThresMinLog();
+  const float clamp_max = tree.getClampingThresMaxLog();
+  const auto clamped = [&](const octomap::OcTreeNode* node) {
+    return (update >= 0 && node->getLogOdds() >= clamp_max) ||
+           (update <= 0 && node->getLogOdds() <= clamp_min);
+  };
+  octomap::OcTreeNode* path[kDepth + 1];
+  int known = 0;  // path[0, known) hold the previous key's nodes from the root down
+  std::uint64_t previous = 0;
+  for (std::uint64_t packed : keys) {
+    const octomap::OcTreeKey key = Unpack(packed);
+    if (tree.getRoot() == nullptr) {  // an empty tree: updateNode creates the root
+      tree.updateNode(key, update, true);
+      continue;
+    }
+    // Levels shared with the previous key: its leading equal bits in all three coordinates.
+    const std::uint64_t diff = packed ^ previous;
+    const unsigned differing = static_cast<unsigned>((diff | diff >> 16 | diff >> 32) & 0xffff);
+    const int shared = differing == 0 ? kDepth : __builtin_clz(differing) - 16;
+    path[0] = tree.getRoot();
+    int depth = std::min(shared, std::max(known - 1, 0));
+    octomap::OcTreeNode* node = path[depth];
+    bool created = false, aborted = false;
+    for (; depth < kDepth; path[++depth] = node) {
+      const unsigned child = octomap::computeChildIdx(key, kDepth - 1 - depth);
+      if (!tree.nodeChildExists(node, child)) {
+        if (!created && !tree.nodeHasChildren(node)) {
+          // A pruned node stands for the cell: updateNode's search stops at it.
+          if (clamped(node)) {
+            aborted = true;
+            break;
+          }
+          tree.expandNode(node);
+        } else {
+          tree.createNodeChild(node, child);
+          created = true;
+        }
+      }
+      node = tree.getNodeChild(node, child);
+    }
+    known = depth + 1;
+    previous = packed;
+    if (aborted || (!created && clamped(node))) continue;
+    tree.updateNodeLogOdds(node, update);
+  }
 }
 
 }  // namespace
@@ -290,8 +552,8 @@ void OccupancyMapBuilder::InsertAll(const std::vector<const std::vector<Eigen::V
     // updated at most once per scan, so the order within a scan does not matter, and the inner
     // nodes (maxima of their children) are brought up to date once (InnerNodesUpToDate) instead of
     // along the path of every cell. The leaves, and so the pruned tree, are the same.
-    for (std::uint64_t key : update.free_cells) impl_->tree.updateNode(Unpack(key), false, true);
-    for (std::uint64_t key : update.occupied_cells) impl_->tree.updateNode(Unpack(key), true, true);
+    ApplyLazily(impl_->tree, update.free_cells, impl_->tree.getProbMissLog());
+    ApplyLazily(impl_->tree, update.occupied_cells, impl_->tree.getProbHitLog());
     ++impl_->frames;
     impl_->points += update.points;
     impl_->inner_stale = true;
