@@ -6,6 +6,8 @@
 #include <limits>
 #include <utility>
 
+#include <absl/container/flat_hash_map.h>
+
 #include "planeslam/datasets/errors.hpp"
 
 namespace planeslam::mapping {
@@ -27,59 +29,63 @@ std::int64_t FloorIndex(double x, double cell) {
   return static_cast<std::int64_t>(std::floor(x / cell));
 }
 
-/// Mean point per cell of a grid on the plane (basis) of the points; deterministic order (by cell).
-/// Dense accumulation over the points' bounding box (a plane's box holds few cells: 4 x 3 m at 4 cm
-/// is 7500), hashing only when the box is huge; per point this is a projection and an add.
+std::int64_t CellI(std::int64_t key) { return key >> 32; }
+std::int64_t CellJ(std::int64_t key) { return static_cast<std::int32_t>(key & 0xffffffff); }
+
+/// The key of the cell 2^levels times larger that holds cell `key` (floor division of i and j).
+std::int64_t CoarserKey(std::int64_t key, int levels) {
+  return CellKey(CellI(key) >> levels, CellJ(key) >> levels);
+}
+
+/// No cell (a non-finite point): the key of no reachable (i, j).
+constexpr std::int64_t kNoCell = std::numeric_limits<std::int64_t>::min();
+
+/// Mean point per cell of a grid on the plane (basis) of the points, in (i, j) order, with the
+/// cell doubled from `cell` until at most `max_samples` cells are occupied: the memory per
+/// observation stays bounded whatever the plane's size. The points are projected once: the index
+/// at cell c 2^k is floor(x / c) >> k exactly (dividing by a power of two commutes with rounding),
+/// so each doubling only merges the occupied cells of the level before.
 std::vector<Eigen::Vector3f> GridSamples(const std::vector<Eigen::Vector3f>& points,
-                                         const PlaneBasis& basis, double cell) {
-  std::vector<std::pair<std::int64_t, std::int64_t>> ij;
-  ij.reserve(points.size());
-  std::int64_t i0 = std::numeric_limits<std::int64_t>::max(), j0 = i0;
-  std::int64_t i1 = std::numeric_limits<std::int64_t>::min(), j1 = i1;
-  for (const auto& pf : points) {
-    if (!pf.allFinite()) {
-      ij.emplace_back(std::numeric_limits<std::int64_t>::min(), 0);
-      continue;
-    }
-    const Eigen::Vector2d xy = basis.Project(pf.cast<double>());
-    const std::int64_t i = FloorIndex(xy.x(), cell), j = FloorIndex(xy.y(), cell);
-    ij.emplace_back(i, j);
-    i0 = std::min(i0, i), i1 = std::max(i1, i), j0 = std::min(j0, j), j1 = std::max(j1, j);
+                                         const PlaneBasis& basis, double cell, int max_samples) {
+  std::vector<std::int64_t> keys(points.size(), kNoCell);
+  absl::flat_hash_set<std::int64_t> occupied;
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    if (!points[k].allFinite()) continue;
+    const Eigen::Vector2d xy = basis.Project(points[k].cast<double>());
+    keys[k] = CellKey(FloorIndex(xy.x(), cell), FloorIndex(xy.y(), cell));
+    occupied.insert(keys[k]);
+  }
+  int level = 0;
+  while (static_cast<int>(occupied.size()) > max_samples) {
+    absl::flat_hash_set<std::int64_t> coarser;
+    coarser.reserve(occupied.size() / 2);
+    for (const std::int64_t key : occupied) coarser.insert(CoarserKey(key, 1));
+    occupied.swap(coarser);
+    ++level;
+  }
+  // Cells in (i, j) order, each with its slot; points summed in input order.
+  std::vector<std::pair<std::int64_t, std::int64_t>> order;
+  order.reserve(occupied.size());
+  for (const std::int64_t key : occupied) order.emplace_back(CellI(key), CellJ(key));
+  std::sort(order.begin(), order.end());
+  absl::flat_hash_map<std::int64_t, int> slot;
+  slot.reserve(order.size());
+  for (std::size_t c = 0; c < order.size(); ++c) {
+    slot.emplace(CellKey(order[c].first, order[c].second), static_cast<int>(c));
+  }
+  std::vector<Eigen::Vector3d> sum(order.size(), Eigen::Vector3d::Zero());
+  std::vector<int> count(order.size(), 0);
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    if (keys[k] == kNoCell) continue;
+    const int c = slot.at(CoarserKey(keys[k], level));
+    sum[c] += points[k].cast<double>();
+    ++count[c];
   }
   std::vector<Eigen::Vector3f> samples;
-  if (i0 > i1) return samples;
-  const std::int64_t w = i1 - i0 + 1, h = j1 - j0 + 1;
-  constexpr std::int64_t kMaxDenseCells = 1 << 22;
-  if (w <= kMaxDenseCells / h) {
-    std::vector<Eigen::Vector3d> sum(static_cast<std::size_t>(w * h), Eigen::Vector3d::Zero());
-    std::vector<int> count(static_cast<std::size_t>(w * h), 0);
-    for (std::size_t k = 0; k < points.size(); ++k) {
-      if (ij[k].first == std::numeric_limits<std::int64_t>::min()) continue;
-      const auto c = static_cast<std::size_t>((ij[k].first - i0) * h + (ij[k].second - j0));
-      sum[c] += points[k].cast<double>();
-      ++count[c];
-    }
-    // Row-major over (i, j): the same order as sorting by CellKey for these non-negative offsets.
-    for (std::size_t c = 0; c < sum.size(); ++c) {
-      if (count[c] > 0) samples.push_back((sum[c] / count[c]).cast<float>());
-    }
-    return samples;
+  samples.reserve(order.size());
+  for (std::size_t c = 0; c < order.size(); ++c) {
+    samples.push_back((sum[c] / count[c]).cast<float>());
   }
-  std::unordered_map<std::int64_t, std::pair<Eigen::Vector3d, int>> cells;
-  for (std::size_t k = 0; k < points.size(); ++k) {
-    if (ij[k].first == std::numeric_limits<std::int64_t>::min()) continue;
-    auto& c = cells[CellKey(ij[k].first, ij[k].second)];
-    if (c.second == 0) c.first.setZero();
-    c.first += points[k].cast<double>();
-    ++c.second;
-  }
-  std::vector<std::pair<std::int64_t, Eigen::Vector3f>> sorted;
-  sorted.reserve(cells.size());
-  for (const auto& [key, c] : cells) sorted.emplace_back(key, (c.first / c.second).cast<float>());
-  std::sort(sorted.begin(), sorted.end(),
-            [](const auto& a, const auto& b) { return a.first < b.first; });
-  samples.reserve(sorted.size());
-  for (const auto& kv : sorted) samples.push_back(kv.second);
   return samples;
 }
 
@@ -184,14 +190,10 @@ PlaneObservation PlaneMap::MakeObservation(std::int64_t keyframe_id, const detec
   const PlaneBasis basis = MakePlaneBasis(fit.normal, fit.d);
 
   if (points && !points->empty()) {
-    // Doubling the cell until the samples fit keeps the memory per observation bounded whatever the
-    // plane's size; the outline's accuracy is set by the polygon cell anyway.
-    double cell = config_.sample_cell_size;
-    for (;;) {
-      obs.samples_sensor = GridSamples(*points, basis, cell);
-      if (static_cast<int>(obs.samples_sensor.size()) <= config_.max_samples_per_observation) break;
-      cell *= 2.0;
-    }
+    // The outline's accuracy is set by the polygon cell: a coarser sample cell on a large plane
+    // loses nothing there.
+    obs.samples_sensor = GridSamples(*points, basis, config_.sample_cell_size,
+                                     config_.max_samples_per_observation);
   }
   if (obs.samples_sensor.empty()) {
     // No points given: a point set spread uniformly over [-a, a] has variance a^2 / 3, so the
@@ -256,6 +258,7 @@ void PlaneMap::AddToExtent(Extent& extent, const std::vector<Eigen::Vector3d>& w
     const Eigen::Vector2d xy = extent.basis.Project(p);
     extent.fine.insert(CellKey(FloorIndex(xy.x(), extent.cell), FloorIndex(xy.y(), extent.cell)));
     extent.coarse.insert(CellKey(FloorIndex(xy.x(), coarse), FloorIndex(xy.y(), coarse)));
+    extent.box.extend(xy);
   }
 }
 
@@ -275,9 +278,13 @@ int PlaneMap::CountTouching(const Extent& extent, const std::vector<Eigen::Vecto
   const double radius = config_.max_gap + extent.cell * M_SQRT1_2;
   const double coarse = config_.max_gap + extent.cell;
   const int r = static_cast<int>(std::ceil(radius / extent.cell));
+  // Every occupied cell's centre lies within half a cell of the box of the points added.
+  const double reach = radius + extent.cell;
+  if (extent.box.isEmpty()) return 0;
   int touching = 0;
   for (const auto& p : world_points) {
     const Eigen::Vector2d xy = extent.basis.Project(p);
+    if (extent.box.exteriorDistance(xy) > reach) continue;
     const std::int64_t ci = FloorIndex(xy.x(), coarse);
     const std::int64_t cj = FloorIndex(xy.y(), coarse);
     bool near_coarse = false;
@@ -315,14 +322,12 @@ bool PlaneMap::Coincide(const MapPlane& a, const MapPlane& b, double across_gaps
   std::vector<Eigen::Vector3d> cells;
   cells.reserve(eb.fine.size());
   for (const std::int64_t key : eb.fine) {
-    const std::int64_t i = key >> 32;
-    const std::int64_t j = static_cast<std::int32_t>(key & 0xffffffff);
+    const std::int64_t i = CellI(key), j = CellJ(key);
     cells.push_back(eb.basis.Unproject(Eigen::Vector2d((static_cast<double>(i) + 0.5) * eb.cell,
                                                        (static_cast<double>(j) + 0.5) * eb.cell)));
   }
-  std::sort(cells.begin(), cells.end(), [](const Eigen::Vector3d& x, const Eigen::Vector3d& y) {
-    return std::lexicographical_compare(x.data(), x.data() + 3, y.data(), y.data() + 3);
-  });  // deterministic order whatever the hash set's
+  // The order of the cells (the hash set's) does not matter: whether `need` of them touch does
+  // not depend on which are counted first.
   const int need = std::min<int>(config_.min_touch_points, static_cast<int>(cells.size()));
   return need > 0 && CountTouching(extents_[IndexOf(a.id)], cells, need) >= need;
 }
@@ -638,8 +643,7 @@ MapPlaneOutline PlaneMap::Outline(const MapPlane& plane) const {
       occupied.insert(CellKey(FloorIndex(p.x(), cell), FloorIndex(p.y(), cell)));
     std::int64_t boundary_edges = 0;
     for (const std::int64_t key : occupied) {
-      const std::int64_t i = key >> 32;
-      const std::int64_t j = static_cast<std::int32_t>(key & 0xffffffff);
+      const std::int64_t i = CellI(key), j = CellJ(key);
       boundary_edges +=
           (occupied.count(CellKey(i + 1, j)) == 0) + (occupied.count(CellKey(i - 1, j)) == 0) +
           (occupied.count(CellKey(i, j + 1)) == 0) + (occupied.count(CellKey(i, j - 1)) == 0);

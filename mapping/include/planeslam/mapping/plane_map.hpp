@@ -212,6 +212,7 @@ class PlaneMap {
     // Open-addressing sets: the extents are rebuilt after every whole-graph optimisation.
     absl::flat_hash_set<std::int64_t> fine;    ///< cells of size `cell`
     absl::flat_hash_set<std::int64_t> coarse;  ///< cells of size max_gap (fast rejection)
+    Eigen::AlignedBox2d box;  ///< of the points added, in the basis (faster rejection)
   };
 
   PlaneObservation MakeObservation(std::int64_t keyframe_id, const detection::Plane& plane,
