@@ -191,7 +191,7 @@ class PackedKeySet {
   std::size_t size_ = 0;
 };
 
-/// The cells one scan frees and occupies (packed keys, ascending, disjoint), exactly the sets
+/// The cells one scan frees and occupies (packed keys, disjoint, each once), exactly the sets
 /// octomap::OcTree::computeDiscreteUpdate computes: one ray per end voxel (to its centre), rays
 /// longer than max_range cut there and without an end voxel, end voxels removed from the free
 /// cells. It depends only on the scan, the pose and the resolution, so scans can be ray-cast in
@@ -266,7 +266,7 @@ class RayWalk {
 template <typename Visit>
 void WalkRays(const octomap::OcTree& keys, const octomap::point3d& origin,
               const std::vector<octomap::point3d>& ends, Visit&& visit) {
-  constexpr int kLanes = 4;
+  constexpr int kLanes = 8;
   RayWalk lanes[kLanes];
   bool active[kLanes] = {};
   std::size_t next = 0;
@@ -294,26 +294,53 @@ void WalkRays(const octomap::OcTree& keys, const octomap::point3d& origin,
   }
 }
 
+constexpr int kBrickBits = 3;  // bricks of free cells: 8 cells a side (see CellBitmap)
+constexpr std::uint32_t kBrickCells = 1u << (3 * kBrickBits);
+constexpr std::uint32_t kBrickWords = kBrickCells / 64;
+
+/// Morton index of a cell within its brick (bit b of x, y, z at 3b, 3b + 1, 3b + 2) and back, as
+/// the packed key offset (x | y << 16 | z << 32), from tables.
+struct MortonTables {
+  std::uint32_t spread[1u << kBrickBits] = {};
+  std::uint64_t offset[kBrickCells] = {};
+  constexpr MortonTables() {
+    for (std::uint32_t v = 0; v < (1u << kBrickBits); ++v) {
+      for (int b = 0; b < kBrickBits; ++b) spread[v] |= (v >> b & 1) << (3 * b);
+    }
+    for (std::uint32_t m = 0; m < kBrickCells; ++m) {
+      for (int b = 0; b < kBrickBits; ++b) {
+        offset[m] |= std::uint64_t{m >> (3 * b) & 1} << b |
+                     std::uint64_t{m >> (3 * b + 1) & 1} << (b + 16) |
+                     std::uint64_t{m >> (3 * b + 2) & 1} << (b + 32);
+      }
+    }
+  }
+};
+constexpr MortonTables kMorton{};
+
 /// A scan's free cells as one bit per cell of the box of keys its rays span. Marking a cell is a
 /// bit set where a hash set needs a probe into a table of millions of keys (most rays of a scan
-/// cross the same cells near the sensor), and reading the bits row by row gives the keys in
-/// ascending packed order without a sort. Rows run along x and are padded to whole words.
+/// cross the same cells near the sensor). The bits are kept in bricks of 8 x 8 x 8 cells aligned
+/// to the octree (each brick one node three levels above the leaves), cells in Morton order
+/// within a brick: read in that order, neighbouring cells of the tree come one after another,
+/// and applying them touches each node's children together.
 class CellBitmap {
  public:
   /// Largest bitmap; a scan whose box needs more (far points and no max_range, rays sparse in
   /// the box) goes through a hash set instead.
   static constexpr std::uint64_t kMaxBits = std::uint64_t{1} << 30;
 
-  /// Sizes the bitmap to the box [lo, hi] (inclusive) and clears it; false when it is too large.
+  /// Sizes the bitmap to the bricks covering the box [lo, hi] (inclusive) and clears it; false
+  /// when it is too large.
   bool Reset(const octomap::OcTreeKey& lo, const octomap::OcTreeKey& hi) {
+    std::uint64_t bricks = 1;
     for (int a = 0; a < 3; ++a) {
-      lo_[a] = lo[a];
-      size_[a] = std::uint32_t{hi[a]} - lo[a] + 1;
+      brick_lo_[a] = lo[a] >> kBrickBits;
+      bricks_[a] = (static_cast<std::uint32_t>(hi[a]) >> kBrickBits) - brick_lo_[a] + 1;
+      bricks *= bricks_[a];
     }
-    row_words_ = (size_[0] + 63) / 64;
-    const std::uint64_t words = std::uint64_t{row_words_} * size_[1] * size_[2];
-    if (words * 64 > kMaxBits) return false;
-    words_.assign(words, 0);
+    if (bricks * kBrickCells > kMaxBits) return false;
+    words_.assign(bricks * kBrickWords, 0);
     outside_.clear();
     return true;
   }
@@ -326,50 +353,58 @@ class CellBitmap {
     std::uint64_t bit;
     if (Bit(key, &bit)) words_[bit >> 6] &= ~(std::uint64_t{1} << (bit & 63));
   }
-  /// The set cells, ascending. Cells outside the box (a ray rounding past its end cell) are
-  /// merged in; none of them is an end cell, since the box holds every end cell.
-  std::vector<std::uint64_t> SortedKeys() const {
-    std::size_t count = 0;
+  /// The set cells, brick by brick (z, y, x) and in Morton order within a brick, then the cells
+  /// outside the box (a ray rounding past its end cell; none of them is an end cell, since the
+  /// box holds every end cell).
+  std::vector<std::uint64_t> Keys() const {
+    std::size_t count = outside_.size();
     for (std::uint64_t word : words_) count += static_cast<std::size_t>(__builtin_popcountll(word));
     std::vector<std::uint64_t> keys;
-    keys.reserve(count + outside_.size());
+    keys.reserve(count);
     std::size_t w = 0;
-    for (std::uint32_t z = 0; z < size_[2]; ++z) {
-      for (std::uint32_t y = 0; y < size_[1]; ++y) {
-        const std::uint64_t row = std::uint64_t{lo_[1] + y} << 16 | std::uint64_t{lo_[2] + z} << 32;
-        for (std::uint32_t rw = 0; rw < row_words_; ++rw, ++w) {
-          for (std::uint64_t bits = words_[w]; bits != 0; bits &= bits - 1) {
-            keys.push_back(row | (lo_[0] + rw * 64 + static_cast<unsigned>(__builtin_ctzll(bits))));
+    for (std::uint32_t bz = 0; bz < bricks_[2]; ++bz) {
+      for (std::uint32_t by = 0; by < bricks_[1]; ++by) {
+        for (std::uint32_t bx = 0; bx < bricks_[0]; ++bx) {
+          const std::uint64_t corner = Pack(octomap::OcTreeKey(
+              static_cast<octomap::key_type>((brick_lo_[0] + bx) << kBrickBits),
+              static_cast<octomap::key_type>((brick_lo_[1] + by) << kBrickBits),
+              static_cast<octomap::key_type>((brick_lo_[2] + bz) << kBrickBits)));
+          for (std::uint32_t k = 0; k < kBrickWords; ++k, ++w) {
+            for (std::uint64_t bits = words_[w]; bits != 0; bits &= bits - 1) {
+              keys.push_back(corner | CellOffset(k * 64 + __builtin_ctzll(bits)));
+            }
           }
         }
       }
     }
-    if (!outside_.empty()) {
-      std::vector<std::uint64_t> extra = outside_;
-      std::sort(extra.begin(), extra.end());
-      extra.erase(std::unique(extra.begin(), extra.end()), extra.end());
-      std::vector<std::uint64_t> merged;
-      merged.reserve(keys.size() + extra.size());
-      std::merge(keys.begin(), keys.end(), extra.begin(), extra.end(), std::back_inserter(merged));
-      keys.swap(merged);
-    }
+    keys.insert(keys.end(), outside_.begin(), outside_.end());
+    std::sort(keys.end() - static_cast<std::ptrdiff_t>(outside_.size()), keys.end());
+    keys.erase(std::unique(keys.end() - static_cast<std::ptrdiff_t>(outside_.size()), keys.end()),
+               keys.end());
     return keys;
   }
 
  private:
+  static std::uint32_t Morton(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
+    return kMorton.spread[x] | kMorton.spread[y] << 1 | kMorton.spread[z] << 2;
+  }
+  static std::uint64_t CellOffset(std::uint32_t m) { return kMorton.offset[m]; }
   bool Bit(const octomap::OcTreeKey& key, std::uint64_t* bit) const {
-    std::uint32_t c[3];
+    std::uint32_t brick[3];
     for (int a = 0; a < 3; ++a) {
-      c[a] = static_cast<std::uint32_t>(key[a]) - lo_[a];  // wraps when below lo: one compare
-      if (c[a] >= size_[a]) return false;
+      // Wraps when below the box: one compare.
+      brick[a] = (static_cast<std::uint32_t>(key[a]) >> kBrickBits) - brick_lo_[a];
+      if (brick[a] >= bricks_[a]) return false;
     }
-    *bit = (std::uint64_t{c[2]} * size_[1] + c[1]) * row_words_ * 64 + c[0];
+    constexpr std::uint32_t kMask = (1u << kBrickBits) - 1;
+    const std::uint64_t index =
+        (std::uint64_t{brick[2]} * bricks_[1] + brick[1]) * bricks_[0] + brick[0];
+    *bit = index * kBrickCells + Morton(key[0] & kMask, key[1] & kMask, key[2] & kMask);
     return true;
   }
 
-  std::uint32_t lo_[3] = {0, 0, 0};
-  std::uint32_t size_[3] = {0, 0, 0};
-  std::uint32_t row_words_ = 0;
+  std::uint32_t brick_lo_[3] = {0, 0, 0};
+  std::uint32_t bricks_[3] = {0, 0, 0};
   std::vector<std::uint64_t> words_;
   std::vector<std::uint64_t> outside_;
 };
@@ -456,7 +491,7 @@ ScanUpdate ComputeScanUpdate(const OccupancyMapConfig& config,
   if (bitmap.Reset(rays.lo, rays.hi)) {
     WalkRays(keys, rays.origin, rays.ends, [&](const octomap::OcTreeKey& k) { bitmap.Set(k); });
     for (std::uint64_t hit : rays.hits) bitmap.Clear(Unpack(hit));
-    update.free_cells = bitmap.SortedKeys();
+    update.free_cells = bitmap.Keys();
   } else {
     update.free_cells = FreeCellsBySet(keys, rays);
   }
@@ -465,12 +500,12 @@ ScanUpdate ComputeScanUpdate(const OccupancyMapConfig& config,
   return update;
 }
 
-/// Adds `update` to the log-odds of the leaves at `keys` (ascending), exactly as
+/// Adds `update` to the log-odds of the leaves at `keys`, exactly as
 /// octomap::OcTree::updateNode(key, update, lazy_eval = true) does key by key: the same early
 /// abort at a clamped leaf or pruned node, the same expansion of pruned nodes, the same new nodes.
 /// Instead of descending from the root twice per key (updateNode searches first), it descends
-/// once, from the deepest node the previous key's path shares: cells in ascending order share
-/// all but their last few levels.
+/// once, from the deepest node the previous key's path shares: cells in brick or ascending order
+/// share all but their last few levels.
 void ApplyLazily(octomap::OcTree& tree, const std::vector<std::uint64_t>& keys, float update) {
   constexpr int kDepth = 16;
   static_assert(sizeof(octomap::key_type) * 8 == kDepth, "an OcTree key has one bit per level");
