@@ -262,12 +262,17 @@ void PlaneMap::AddToExtent(Extent& extent, const std::vector<Eigen::Vector3d>& w
   }
 }
 
-void PlaneMap::RebuildExtent(const MapPlane& plane) {
-  Extent& extent = extents_[IndexOf(plane.id)];
-  extent = Extent();
-  extent.basis = MakePlaneBasis(plane.normal, plane.d);
-  extent.cell = config_.sample_cell_size;
-  AddToExtent(extent, WorldSamples(plane));
+void PlaneMap::InvalidateExtent(const MapPlane& plane) { extents_[IndexOf(plane.id)] = Extent(); }
+
+PlaneMap::Extent& PlaneMap::ExtentAt(std::size_t i) {
+  Extent& extent = extents_[i];
+  if (extent.stale) {
+    extent.basis = MakePlaneBasis(planes_[i].normal, planes_[i].d);
+    extent.cell = config_.sample_cell_size;
+    AddToExtent(extent, WorldSamples(planes_[i]));
+    extent.stale = false;
+  }
+  return extent;
 }
 
 int PlaneMap::CountTouching(const Extent& extent, const std::vector<Eigen::Vector3d>& world_points,
@@ -309,7 +314,7 @@ int PlaneMap::CountTouching(const Extent& extent, const std::vector<Eigen::Vecto
   return touching;
 }
 
-bool PlaneMap::Coincide(const MapPlane& a, const MapPlane& b, double across_gaps_offset) const {
+bool PlaneMap::Coincide(const MapPlane& a, const MapPlane& b, double across_gaps_offset) {
   if (a.normal.dot(b.normal) < std::cos(config_.merge_max_normal_angle_deg * kDegToRad)) {
     return false;
   }
@@ -318,7 +323,7 @@ bool PlaneMap::Coincide(const MapPlane& a, const MapPlane& b, double across_gaps
   if (offset > config_.merge_max_offset) return false;
   if (offset <= across_gaps_offset) return true;  // one surface whatever the gap
   // Touching: b's occupied cells (as world points) near a's extent.
-  const Extent& eb = extents_[IndexOf(b.id)];
+  const Extent& eb = ExtentAt(IndexOf(b.id));
   std::vector<Eigen::Vector3d> cells;
   cells.reserve(eb.fine.size());
   for (const std::int64_t key : eb.fine) {
@@ -329,7 +334,7 @@ bool PlaneMap::Coincide(const MapPlane& a, const MapPlane& b, double across_gaps
   // The order of the cells (the hash set's) does not matter: whether `need` of them touch does
   // not depend on which are counted first.
   const int need = std::min<int>(config_.min_touch_points, static_cast<int>(cells.size()));
-  return need > 0 && CountTouching(extents_[IndexOf(a.id)], cells, need) >= need;
+  return need > 0 && CountTouching(ExtentAt(IndexOf(a.id)), cells, need) >= need;
 }
 
 std::size_t PlaneMap::IndexOf(int id) const {
@@ -351,7 +356,7 @@ void PlaneMap::MergeInto(std::size_t i, std::size_t j) {
   extents_.erase(extents_.begin() + static_cast<std::ptrdiff_t>(j));
   MapPlane& merged = planes_[IndexOf(keep_id)];
   RefitPlane(merged);
-  RebuildExtent(merged);
+  InvalidateExtent(merged);
 }
 
 int PlaneMap::Remove(const std::unordered_set<int>& ids) {
@@ -432,7 +437,7 @@ FrameAssociation PlaneMap::AddObservations(
       if (m.normal.dot(fit.normal) < cos_assoc) continue;
       const double offset = std::abs(m.normal.dot(fit.centroid) - m.d);
       if (offset > offset_gate) continue;
-      if (need == 0 || CountTouching(extents_[i], samples, need) < need) continue;
+      if (need == 0 || CountTouching(ExtentAt(i), samples, need) < need) continue;
       candidates.emplace_back(offset, m.id);
     }
     std::sort(candidates.begin(), candidates.end());
@@ -444,7 +449,7 @@ FrameAssociation PlaneMap::AddObservations(
       RefitPlane(m);
       planes_.push_back(std::move(m));
       extents_.emplace_back();
-      RebuildExtent(planes_.back());
+      InvalidateExtent(planes_.back());
       result.map_ids[k] = planes_.back().id;
       ++result.created;
       continue;
@@ -453,7 +458,7 @@ FrameAssociation PlaneMap::AddObservations(
     const int best_id = candidates.front().second;
     {
       MapPlane& m = planes_[IndexOf(best_id)];
-      Extent& e = extents_[IndexOf(best_id)];
+      Extent& e = ExtentAt(IndexOf(best_id));
       // Keep only the samples that extend the plane's known extent: the samples of a plane then
       // grow with its area, not with the number of keyframes that saw it (a floor seen by 1000
       // keyframes would otherwise hold 1000 copies of itself). After a Refit, the overlap they
@@ -480,7 +485,7 @@ FrameAssociation PlaneMap::AddObservations(
       m.first_keyframe = std::min(m.first_keyframe, keyframe_id);
       m.last_keyframe = std::max(m.last_keyframe, keyframe_id);
       if (m.normal.dot(e.basis.normal) < cos_rebuild) {
-        RebuildExtent(m);
+        InvalidateExtent(m);
       } else {
         AddToExtent(e, samples);
       }
@@ -556,7 +561,7 @@ int PlaneMap::Refit(const std::unordered_map<std::int64_t, Pose>& T_world_keyfra
                     [&](const PlaneObservation& obs) { return moved.count(obs.keyframe_id) != 0; });
     if (!seen_moving) continue;
     RefitPlane(plane);
-    RebuildExtent(plane);
+    InvalidateExtent(plane);
     changed.insert(plane.id);
   }
   return MergeCoincident(config_.refit_merge_across_gaps_offset, &changed);
@@ -589,14 +594,14 @@ int PlaneMap::SplitContradicted() {
     }
     planes_[i].observations = std::move(keep);
     RefitPlane(planes_[i]);
-    RebuildExtent(planes_[i]);
+    InvalidateExtent(planes_[i]);
     MapPlane split;
     split.id = next_id_++;
     split.observations = std::move(leave);
     RefitPlane(split);
     planes_.push_back(std::move(split));
     extents_.emplace_back();
-    RebuildExtent(planes_.back());
+    InvalidateExtent(planes_.back());
     ++splits;
   }
   return splits;

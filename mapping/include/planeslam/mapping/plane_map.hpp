@@ -213,16 +213,22 @@ class PlaneMap {
     absl::flat_hash_set<std::int64_t> fine;    ///< cells of size `cell`
     absl::flat_hash_set<std::int64_t> coarse;  ///< cells of size max_gap (fast rejection)
     Eigen::AlignedBox2d box;  ///< of the points added, in the basis (faster rejection)
+    /// To be built from the plane before use: built on demand, since after an optimisation most
+    /// planes are never tested for touching before the next one moves them again.
+    bool stale = true;
   };
 
   PlaneObservation MakeObservation(std::int64_t keyframe_id, const detection::Plane& plane,
                                    const std::vector<Eigen::Vector3f>* points) const;
   void RefitPlane(MapPlane& plane) const;
-  void RebuildExtent(const MapPlane& plane);
+  /// Drops the extent of `plane`, to be built again from it when next used.
+  void InvalidateExtent(const MapPlane& plane);
+  /// extents_[i], built first if stale.
+  Extent& ExtentAt(std::size_t i);
   void AddToExtent(Extent& extent, const std::vector<Eigen::Vector3d>& world_points) const;
   int CountTouching(const Extent& extent, const std::vector<Eigen::Vector3d>& world_points,
                     int enough) const;
-  bool Coincide(const MapPlane& a, const MapPlane& b, double across_gaps_offset) const;
+  bool Coincide(const MapPlane& a, const MapPlane& b, double across_gaps_offset);
   /// MergeCoincidentPlanes over the pairs with a plane in `changed` (all pairs when null); a
   /// merged plane joins `changed`.
   int MergeCoincident(double across_gaps_offset, std::unordered_set<int>* changed);
