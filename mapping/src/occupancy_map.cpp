@@ -205,24 +205,29 @@ struct ScanUpdate {
 /// the same cells in the same order, with its arithmetic (Amanatides and Woo's 3D DDA).
 class RayWalk {
  public:
-  /// Sets up the walk and returns the first cell (the sensor's) in *first; false when the ray has
-  /// no cells (a coordinate outside the tree, where computeRayKeys fails, or both ends in one cell).
+  /// Sets up the walk and returns the first cell (the sensor's, packed) in *first; false when the
+  /// ray has no cells (a coordinate outside the tree, where computeRayKeys fails, or both ends in
+  /// one cell).
   bool Start(const octomap::OcTree& keys, const octomap::point3d& origin,
-             const octomap::point3d& end, octomap::OcTreeKey* first) {
-    if (!keys.coordToKeyChecked(origin, key_) || !keys.coordToKeyChecked(end, key_end_)) {
+             const octomap::point3d& end, std::uint64_t* first) {
+    octomap::OcTreeKey key, key_end;
+    if (!keys.coordToKeyChecked(origin, key) || !keys.coordToKeyChecked(end, key_end)) {
       return false;
     }
-    if (key_ == key_end_) return false;
-    *first = key_;
+    if (key == key_end) return false;
+    cell_ = *first = Pack(key);
+    end_cell_ = Pack(key_end);
     octomap::point3d direction = end - origin;
     length_ = static_cast<float>(direction.norm());
     direction /= length_;
     const double resolution = keys.getResolution();
     for (int i = 0; i < 3; ++i) {
-      step_[i] = direction(i) > 0.0 ? 1 : (direction(i) < 0.0 ? -1 : 0);
-      if (step_[i] != 0) {
-        double border = keys.keyToCoord(key_[i]);
-        border += static_cast<float>(step_[i] * resolution * 0.5);
+      const int step = direction(i) > 0.0 ? 1 : (direction(i) < 0.0 ? -1 : 0);
+      // A step in the packed key: no carry or borrow crosses fields, keys stay within the tree.
+      step_[i] = static_cast<std::uint64_t>(static_cast<std::int64_t>(step)) << (16 * i);
+      if (step != 0) {
+        double border = keys.keyToCoord(key[i]);
+        border += static_cast<float>(step * resolution * 0.5);
         t_max_[i] = (border - origin(i)) / direction(i);
         t_delta_[i] = resolution / std::fabs(direction(i));
       } else {
@@ -233,14 +238,14 @@ class RayWalk {
     return true;
   }
   /// Steps into the next cell and returns it in *cell; false when the walk has ended.
-  bool Advance(octomap::OcTreeKey* cell) {
-    key_[axis_] = static_cast<octomap::key_type>(key_[axis_] + step_[axis_]);
+  bool Advance(std::uint64_t* cell) {
+    cell_ += step_[axis_];
     t_max_[axis_] += t_delta_[axis_];
-    if (key_ == key_end_) return false;
+    if (cell_ == end_cell_) return false;
     axis_ = NextAxis();
     // Past the end point without reaching its cell (rounding): the walk stops, as octomap's does.
     if (t_max_[axis_] > length_) return false;
-    *cell = key_;
+    *cell = cell_;
     return true;
   }
 
@@ -253,14 +258,14 @@ class RayWalk {
     return t_max_[first] < t_max_[2] ? first : 2;
   }
 
-  octomap::OcTreeKey key_, key_end_;
-  int step_[3] = {0, 0, 0};
+  std::uint64_t cell_ = 0, end_cell_ = 0;  // packed keys
+  std::uint64_t step_[3] = {0, 0, 0};       // packed, two's complement for -1
   double t_max_[3] = {0, 0, 0}, t_delta_[3] = {0, 0, 0};
   float length_ = 0;
   int axis_ = 0;
 };
 
-/// Calls visit(key) for every cell computeRayKeys(origin, end) returns, for every end in `ends`
+/// Calls visit(packed key) for every cell computeRayKeys(origin, end) returns, for every end in `ends`
 /// (each cell as often as it lies on a ray, in no particular order). A walk is a chain of
 /// dependent steps, so kLanes rays are walked side by side for the processor to overlap them.
 template <typename Visit>
@@ -270,7 +275,7 @@ void WalkRays(const octomap::OcTree& keys, const octomap::point3d& origin,
   RayWalk lanes[kLanes];
   bool active[kLanes] = {};
   std::size_t next = 0;
-  octomap::OcTreeKey cell;
+  std::uint64_t cell;
   const auto start = [&](int lane) {
     while (next < ends.size()) {
       if (lanes[lane].Start(keys, origin, ends[next++], &cell)) {
@@ -344,12 +349,12 @@ class CellBitmap {
     outside_.clear();
     return true;
   }
-  void Set(const octomap::OcTreeKey& key) {
+  void Set(std::uint64_t key) {
     std::uint64_t bit;
     if (Bit(key, &bit)) words_[bit >> 6] |= std::uint64_t{1} << (bit & 63);
-    else outside_.push_back(Pack(key));
+    else outside_.push_back(key);
   }
-  void Clear(const octomap::OcTreeKey& key) {
+  void Clear(std::uint64_t key) {
     std::uint64_t bit;
     if (Bit(key, &bit)) words_[bit >> 6] &= ~(std::uint64_t{1} << (bit & 63));
   }
@@ -389,17 +394,18 @@ class CellBitmap {
     return kMorton.spread[x] | kMorton.spread[y] << 1 | kMorton.spread[z] << 2;
   }
   static std::uint64_t CellOffset(std::uint32_t m) { return kMorton.offset[m]; }
-  bool Bit(const octomap::OcTreeKey& key, std::uint64_t* bit) const {
-    std::uint32_t brick[3];
+  bool Bit(std::uint64_t key, std::uint64_t* bit) const {
+    std::uint32_t c[3], brick[3];
     for (int a = 0; a < 3; ++a) {
+      c[a] = static_cast<std::uint32_t>(key >> (16 * a) & 0xffff);
       // Wraps when below the box: one compare.
-      brick[a] = (static_cast<std::uint32_t>(key[a]) >> kBrickBits) - brick_lo_[a];
+      brick[a] = (c[a] >> kBrickBits) - brick_lo_[a];
       if (brick[a] >= bricks_[a]) return false;
     }
     constexpr std::uint32_t kMask = (1u << kBrickBits) - 1;
     const std::uint64_t index =
         (std::uint64_t{brick[2]} * bricks_[1] + brick[1]) * bricks_[0] + brick[0];
-    *bit = index * kBrickCells + Morton(key[0] & kMask, key[1] & kMask, key[2] & kMask);
+    *bit = index * kBrickCells + Morton(c[0] & kMask, c[1] & kMask, c[2] & kMask);
     return true;
   }
 
@@ -461,7 +467,7 @@ ScanRays CollectRays(const octomap::OcTree& keys, const OccupancyMapConfig& conf
 std::vector<std::uint64_t> FreeCellsBySet(const octomap::OcTree& keys, const ScanRays& rays) {
   PackedKeySet free_cells;
   WalkRays(keys, rays.origin, rays.ends,
-           [&](const octomap::OcTreeKey& k) { free_cells.Insert(Pack(k)); });
+           [&](std::uint64_t cell) { free_cells.Insert(cell); });
   std::vector<std::uint64_t> cells = free_cells.TakeSorted();
   std::vector<std::uint64_t> kept;
   kept.reserve(cells.size());
@@ -489,8 +495,8 @@ ScanUpdate ComputeScanUpdate(const OccupancyMapConfig& config,
   ScanUpdate update;
   thread_local CellBitmap bitmap;  // kept: clearing memory already mapped is cheaper than mapping it
   if (bitmap.Reset(rays.lo, rays.hi)) {
-    WalkRays(keys, rays.origin, rays.ends, [&](const octomap::OcTreeKey& k) { bitmap.Set(k); });
-    for (std::uint64_t hit : rays.hits) bitmap.Clear(Unpack(hit));
+    WalkRays(keys, rays.origin, rays.ends, [&](std::uint64_t cell) { bitmap.Set(cell); });
+    for (std::uint64_t hit : rays.hits) bitmap.Clear(hit);
     update.free_cells = bitmap.Keys();
   } else {
     update.free_cells = FreeCellsBySet(keys, rays);
