@@ -1,6 +1,7 @@
 #include "planeslam/mapping/occupancy_map.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <deque>
@@ -10,6 +11,8 @@
 #include <iterator>
 #include <limits>
 #include <utility>
+
+#include <absl/container/flat_hash_map.h>
 
 #include "planeslam/datasets/atomic_file.hpp"
 #include "planeslam/datasets/errors.hpp"
@@ -89,9 +92,92 @@ std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>&
 
 #ifdef PLANESLAM_HAVE_OCTOMAP
 
+namespace {
+
+constexpr int kBrickBits = 3;  // bricks of free cells: 8 cells a side (see CellBitmap)
+constexpr std::uint32_t kBrickCells = 1u << (3 * kBrickBits);
+constexpr std::uint32_t kBrickWords = kBrickCells / 64;
+
+/// Morton index of a cell within its brick (bit b of x, y, z at 3b, 3b + 1, 3b + 2) and back, as
+/// the packed key offset (x | y << 16 | z << 32), from tables.
+struct MortonTables {
+  std::uint32_t spread[1u << kBrickBits] = {};
+  std::uint64_t offset[kBrickCells] = {};
+  constexpr MortonTables() {
+    for (std::uint32_t v = 0; v < (1u << kBrickBits); ++v) {
+      for (int b = 0; b < kBrickBits; ++b) spread[v] |= (v >> b & 1) << (3 * b);
+    }
+    for (std::uint32_t m = 0; m < kBrickCells; ++m) {
+      for (int b = 0; b < kBrickBits; ++b) {
+        offset[m] |= std::uint64_t{m >> (3 * b) & 1} << b |
+                     std::uint64_t{m >> (3 * b + 1) & 1} << (b + 16) |
+                     std::uint64_t{m >> (3 * b + 2) & 1} << (b + 32);
+      }
+    }
+  }
+};
+constexpr MortonTables kMorton{};
+
+/// Cells whose log-odds are at the lower clamping bound, one bit each in bricks of 8 x 8 x 8:
+/// a miss there changes nothing (octomap's updateNode returns early), so it is skipped before
+/// the tree is searched. A free cell reached by many rays settles there after a few scans and
+/// stays until a hit, so most misses of a long run fall on such cells.
+class SaturatedFreeCells {
+ public:
+  bool Contains(std::uint64_t key) {
+    const std::uint64_t* block = Block(key, false);
+    const std::uint32_t m = CellIndex(key);
+    return block != nullptr && (block[m >> 6] >> (m & 63) & 1) != 0;
+  }
+  void Insert(std::uint64_t key) {
+    const std::uint32_t m = CellIndex(key);
+    Block(key, true)[m >> 6] |= std::uint64_t{1} << (m & 63);
+  }
+  void Erase(std::uint64_t key) {
+    std::uint64_t* block = Block(key, false);
+    const std::uint32_t m = CellIndex(key);
+    if (block != nullptr) block[m >> 6] &= ~(std::uint64_t{1} << (m & 63));
+  }
+
+ private:
+  static std::uint32_t CellIndex(std::uint64_t key) {
+    constexpr std::uint64_t kMask = (1u << kBrickBits) - 1;
+    return kMorton.spread[key & kMask] | kMorton.spread[key >> 16 & kMask] << 1 |
+           kMorton.spread[key >> 32 & kMask] << 2;
+  }
+  /// The bits of the brick holding `key`, created when asked to; null when absent. Consecutive
+  /// look-ups mostly fall in one brick: the last one is kept.
+  std::uint64_t* Block(std::uint64_t key, bool create) {
+    constexpr std::uint64_t kCellBits = 0x0000'0007'0007'0007ULL;
+    const std::uint64_t brick = key & ~kCellBits;
+    if (brick != last_brick_) {
+      const auto it = index_.find(brick);
+      if (it != index_.end()) {
+        last_block_ = it->second;
+      } else if (create) {
+        last_block_ = blocks_.size();
+        index_.emplace(brick, last_block_);
+        blocks_.emplace_back();
+      } else {
+        return nullptr;
+      }
+      last_brick_ = brick;
+    }
+    return blocks_[last_block_].data();
+  }
+
+  absl::flat_hash_map<std::uint64_t, std::size_t> index_;
+  std::vector<std::array<std::uint64_t, kBrickWords>> blocks_;
+  std::uint64_t last_brick_ = ~std::uint64_t{0};
+  std::size_t last_block_ = 0;
+};
+
+}  // namespace
+
 struct OccupancyMapBuilder::Impl {
   explicit Impl(double resolution) : tree(resolution) {}
   octomap::OcTree tree;
+  SaturatedFreeCells saturated;
   std::size_t frames = 0;
   std::size_t points = 0;
   bool inner_stale = false;  ///< inserted lazily since the inner nodes were last updated
@@ -299,30 +385,6 @@ void WalkRays(const octomap::OcTree& keys, const octomap::point3d& origin,
   }
 }
 
-constexpr int kBrickBits = 3;  // bricks of free cells: 8 cells a side (see CellBitmap)
-constexpr std::uint32_t kBrickCells = 1u << (3 * kBrickBits);
-constexpr std::uint32_t kBrickWords = kBrickCells / 64;
-
-/// Morton index of a cell within its brick (bit b of x, y, z at 3b, 3b + 1, 3b + 2) and back, as
-/// the packed key offset (x | y << 16 | z << 32), from tables.
-struct MortonTables {
-  std::uint32_t spread[1u << kBrickBits] = {};
-  std::uint64_t offset[kBrickCells] = {};
-  constexpr MortonTables() {
-    for (std::uint32_t v = 0; v < (1u << kBrickBits); ++v) {
-      for (int b = 0; b < kBrickBits; ++b) spread[v] |= (v >> b & 1) << (3 * b);
-    }
-    for (std::uint32_t m = 0; m < kBrickCells; ++m) {
-      for (int b = 0; b < kBrickBits; ++b) {
-        offset[m] |= std::uint64_t{m >> (3 * b) & 1} << b |
-                     std::uint64_t{m >> (3 * b + 1) & 1} << (b + 16) |
-                     std::uint64_t{m >> (3 * b + 2) & 1} << (b + 32);
-      }
-    }
-  }
-};
-constexpr MortonTables kMorton{};
-
 /// A scan's free cells as one bit per cell of the box of keys its rays span. Marking a cell is a
 /// bit set where a hash set needs a probe into a table of millions of keys (most rays of a scan
 /// cross the same cells near the sensor). The bits are kept in bricks of 8 x 8 x 8 cells aligned
@@ -512,7 +574,10 @@ ScanUpdate ComputeScanUpdate(const OccupancyMapConfig& config,
 /// Instead of descending from the root twice per key (updateNode searches first), it descends
 /// once, from the deepest node the previous key's path shares: cells in brick or ascending order
 /// share all but their last few levels.
-void ApplyLazily(octomap::OcTree& tree, const std::vector<std::uint64_t>& keys, float update) {
+///
+/// Misses on cells in `saturated` are skipped (no change), and `saturated` is kept up to date.
+void ApplyLazily(octomap::OcTree& tree, const std::vector<std::uint64_t>& keys, float update,
+                 SaturatedFreeCells& saturated) {
   constexpr int kDepth = 16;
   static_assert(sizeof(octomap::key_type) * 8 == kDepth, "an OcTree key has one bit per level");
   const float clamp_min = tree.getClampingThresMinLog();
@@ -525,6 +590,11 @@ void ApplyLazily(octomap::OcTree& tree, const std::vector<std::uint64_t>& keys, 
   int known = 0;  // path[0, known) hold the previous key's nodes from the root down
   std::uint64_t previous = 0;
   for (std::uint64_t packed : keys) {
+    if (update > 0) {
+      saturated.Erase(packed);
+    } else if (saturated.Contains(packed)) {
+      continue;  // a miss on a cell at the lower bound changes nothing
+    }
     const octomap::OcTreeKey key = Unpack(packed);
     if (tree.getRoot() == nullptr) {  // an empty tree: updateNode creates the root
       tree.updateNode(key, update, true);
@@ -557,8 +627,8 @@ void ApplyLazily(octomap::OcTree& tree, const std::vector<std::uint64_t>& keys, 
     }
     known = depth + 1;
     previous = packed;
-    if (aborted || (!created && clamped(node))) continue;
-    tree.updateNodeLogOdds(node, update);
+    if (!aborted && (created || !clamped(node))) tree.updateNodeLogOdds(node, update);
+    if (update <= 0 && node->getLogOdds() <= clamp_min) saturated.Insert(packed);
   }
 }
 
@@ -593,8 +663,8 @@ void OccupancyMapBuilder::InsertAll(const std::vector<const std::vector<Eigen::V
     // updated at most once per scan, so the order within a scan does not matter, and the inner
     // nodes (maxima of their children) are brought up to date once (InnerNodesUpToDate) instead of
     // along the path of every cell. The leaves, and so the pruned tree, are the same.
-    ApplyLazily(impl_->tree, update.free_cells, impl_->tree.getProbMissLog());
-    ApplyLazily(impl_->tree, update.occupied_cells, impl_->tree.getProbHitLog());
+    ApplyLazily(impl_->tree, update.free_cells, impl_->tree.getProbMissLog(), impl_->saturated);
+    ApplyLazily(impl_->tree, update.occupied_cells, impl_->tree.getProbHitLog(), impl_->saturated);
     ++impl_->frames;
     impl_->points += update.points;
     impl_->inner_stale = true;

@@ -210,7 +210,7 @@ TEST(OccupancyMap, InsertAllMatchesOctomapsInsertPointCloudOverRandomScans) {
     for (int batch = 0; batch < 2; ++batch) {
       std::vector<std::vector<Eigen::Vector3f>> scans;
       std::vector<Pose> poses;
-      for (int s = 0; s < (huge ? 1 : 3); ++s) {
+      for (int s = 0; s < (huge ? 1 : 4); ++s) {
         const Eigen::Vector3f origin(0.5f * half * u(rng), 0.5f * half * u(rng), 0.5f * u(rng));
         scans.push_back(RoomScan(rng, half, huge ? 100 : 1000, origin));
         Pose T = Pose::Identity();
@@ -232,6 +232,38 @@ TEST(OccupancyMap, InsertAllMatchesOctomapsInsertPointCloudOverRandomScans) {
       ASSERT_EQ(FileBytes(path), PrunedBinary(reference)) << "draw " << draw << " batch " << batch;
     }
   }
+}
+
+// A cell that misses have driven to the lower clamping bound is skipped by later misses until a
+// hit raises it: the hit and the misses after it must count as in OctoMap.
+TEST(OccupancyMap, ClampedFreeCellsFollowLaterHitsAsOctomapDoes) {
+  const auto dir = test::ScratchDir();
+  const std::string path = (dir / "map.bt").string();
+  OccupancyMapConfig config;
+  config.max_range = 0.0;
+  config.downsample_voxel = 0.0;
+  OccupancyMapBuilder builder(config);
+  octomap::OcTree reference(config.resolution);
+  reference.setProbHit(config.prob_hit);
+  reference.setProbMiss(config.prob_miss);
+  std::vector<Eigen::Vector3f> wall = Wall(2.0f);
+  wall.pop_back();  // the NaN: octomap's insertPointCloud takes finite points
+  const std::vector<Eigen::Vector3f> in_front = {Eigen::Vector3f(0.1f, 0.1f, 1.0f)};
+  const auto insert = [&](const std::vector<Eigen::Vector3f>& scan) {
+    builder.Insert(scan, Pose::Identity());
+    octomap::Pointcloud cloud;
+    for (const Eigen::Vector3f& p : scan) cloud.push_back(p.x(), p.y(), p.z());
+    reference.insertPointCloud(cloud, octomap::point3d(0, 0, 0), -1.0, true, true);
+  };
+  // The cells in front reach the lower bound; three hits make one of them occupied, and two
+  // misses free again (log-odds -2, +0.54, -0.27: the file holds only the classification).
+  for (int k = 0; k < 6; ++k) insert(wall);
+  for (int k = 0; k < 3; ++k) insert(in_front);
+  EXPECT_EQ(builder.Query(Eigen::Vector3d(0.1, 0.1, 1.0)), Occupancy::kOccupied);
+  for (int k = 0; k < 2; ++k) insert(wall);
+  builder.Write(path);
+  EXPECT_EQ(FileBytes(path), PrunedBinary(reference));
+  EXPECT_EQ(builder.Query(Eigen::Vector3d(0.1, 0.1, 1.0)), Occupancy::kFree);
 }
 #endif
 
