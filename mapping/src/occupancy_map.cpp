@@ -351,8 +351,8 @@ class RayWalk {
   int axis_ = 0;
 };
 
-/// Calls visit(packed key) for every cell computeRayKeys(origin, end) returns, for every end in `ends`
-/// (each cell as often as it lies on a ray, in no particular order). A walk is a chain of
+/// Calls visit(packed key) for every cell computeRayKeys(origin, end) returns, for every end in
+/// `ends` (each cell as often as it lies on a ray, in no particular order). A walk is a chain of
 /// dependent steps, so kLanes rays are walked side by side for the processor to overlap them.
 template <typename Visit>
 void WalkRays(const octomap::OcTree& keys, const octomap::point3d& origin,
@@ -555,7 +555,8 @@ ScanUpdate ComputeScanUpdate(const OccupancyMapConfig& config,
   const octomap::OcTree keys(config.resolution);
   ScanRays rays = CollectRays(keys, config, kept, T_world_sensor);
   ScanUpdate update;
-  thread_local CellBitmap bitmap;  // kept: clearing memory already mapped is cheaper than mapping it
+  // Kept per thread: clearing memory already mapped is cheaper than mapping it afresh.
+  thread_local CellBitmap bitmap;
   if (bitmap.Reset(rays.lo, rays.hi)) {
     WalkRays(keys, rays.origin, rays.ends, [&](std::uint64_t cell) { bitmap.Set(cell); });
     for (std::uint64_t hit : rays.hits) bitmap.Clear(hit);

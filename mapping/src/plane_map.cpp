@@ -32,60 +32,96 @@ std::int64_t FloorIndex(double x, double cell) {
 std::int64_t CellI(std::int64_t key) { return key >> 32; }
 std::int64_t CellJ(std::int64_t key) { return static_cast<std::int32_t>(key & 0xffffffff); }
 
-/// The key of the cell 2^levels times larger that holds cell `key` (floor division of i and j).
-std::int64_t CoarserKey(std::int64_t key, int levels) {
-  return CellKey(CellI(key) >> levels, CellJ(key) >> levels);
-}
+/// A grid's cells over the box of the occupied ones, row-major (i, then j).
+struct CellBox {
+  std::int64_t i0 = 0, j0 = 0, w = 0, h = 0;
+  std::int64_t Index(std::int64_t i, std::int64_t j) const { return (i - i0) * h + (j - j0); }
+};
 
-/// No cell (a non-finite point): the key of no reachable (i, j).
-constexpr std::int64_t kNoCell = std::numeric_limits<std::int64_t>::min();
+/// Most cells counted or accumulated densely over a box; beyond, the occupied cells are hashed.
+constexpr std::int64_t kMaxDenseCells = std::int64_t{1} << 22;
 
 /// Mean point per cell of a grid on the plane (basis) of the points, in (i, j) order, with the
 /// cell doubled from `cell` until at most `max_samples` cells are occupied: the memory per
 /// observation stays bounded whatever the plane's size. The points are projected once: the index
-/// at cell c 2^k is floor(x / c) >> k exactly (dividing by a power of two commutes with rounding),
-/// so each doubling only merges the occupied cells of the level before.
+/// at cell c 2^k is floor(x / c) >> k exactly (dividing by a power of two commutes with rounding).
+/// Cells are counted and summed over the box of the occupied ones (a bit, a slot per cell), which
+/// shrinks fourfold per doubling; only a huge sparse box is hashed.
 std::vector<Eigen::Vector3f> GridSamples(const std::vector<Eigen::Vector3f>& points,
                                          const PlaneBasis& basis, double cell, int max_samples) {
-  std::vector<std::int64_t> keys(points.size(), kNoCell);
-  absl::flat_hash_set<std::int64_t> occupied;
+  std::vector<std::pair<std::int64_t, std::int64_t>> ij;
+  std::vector<std::size_t> valid;
+  ij.reserve(points.size());
+  valid.reserve(points.size());
   for (std::size_t k = 0; k < points.size(); ++k) {
     if (!points[k].allFinite()) continue;
     const Eigen::Vector2d xy = basis.Project(points[k].cast<double>());
-    keys[k] = CellKey(FloorIndex(xy.x(), cell), FloorIndex(xy.y(), cell));
-    occupied.insert(keys[k]);
+    ij.emplace_back(FloorIndex(xy.x(), cell), FloorIndex(xy.y(), cell));
+    valid.push_back(k);
   }
+  if (ij.empty()) return {};
+  std::int64_t i0 = ij[0].first, i1 = i0, j0 = ij[0].second, j1 = j0;
+  for (const auto& [i, j] : ij) {
+    i0 = std::min(i0, i), i1 = std::max(i1, i), j0 = std::min(j0, j), j1 = std::max(j1, j);
+  }
+  const auto box_at = [&](int level) {
+    CellBox box{i0 >> level, j0 >> level, 0, 0};
+    box.w = (i1 >> level) - box.i0 + 1;
+    box.h = (j1 >> level) - box.j0 + 1;
+    return box;
+  };
+  const auto dense = [](const CellBox& box) { return box.w <= kMaxDenseCells / box.h; };
+  // The first level with few enough occupied cells.
   int level = 0;
-  while (static_cast<int>(occupied.size()) > max_samples) {
-    absl::flat_hash_set<std::int64_t> coarser;
-    coarser.reserve(occupied.size() / 2);
-    for (const std::int64_t key : occupied) coarser.insert(CoarserKey(key, 1));
-    occupied.swap(coarser);
-    ++level;
+  for (;; ++level) {
+    const CellBox box = box_at(level);
+    std::size_t occupied = 0;
+    if (dense(box)) {
+      std::vector<std::uint64_t> bits(static_cast<std::size_t>((box.w * box.h + 63) / 64), 0);
+      for (const auto& [i, j] : ij) {
+        const auto c = static_cast<std::uint64_t>(box.Index(i >> level, j >> level));
+        bits[c >> 6] |= std::uint64_t{1} << (c & 63);
+      }
+      for (const std::uint64_t word : bits) occupied += __builtin_popcountll(word);
+    } else {
+      absl::flat_hash_set<std::int64_t> cells;
+      for (const auto& [i, j] : ij) cells.insert(CellKey(i >> level, j >> level));
+      occupied = cells.size();
+    }
+    if (static_cast<int>(occupied) <= max_samples) break;
   }
-  // Cells in (i, j) order, each with its slot; points summed in input order.
-  std::vector<std::pair<std::int64_t, std::int64_t>> order;
-  order.reserve(occupied.size());
-  for (const std::int64_t key : occupied) order.emplace_back(CellI(key), CellJ(key));
-  std::sort(order.begin(), order.end());
-  absl::flat_hash_map<std::int64_t, int> slot;
-  slot.reserve(order.size());
-  for (std::size_t c = 0; c < order.size(); ++c) {
-    slot.emplace(CellKey(order[c].first, order[c].second), static_cast<int>(c));
+  // Sums in input order per cell; cells numbered in (i, j) order.
+  const CellBox box = box_at(level);
+  std::vector<int> slot_of(ij.size());
+  std::size_t cells = 0;
+  if (dense(box)) {
+    const auto at = [&](const std::pair<std::int64_t, std::int64_t>& c) {
+      return static_cast<std::size_t>(box.Index(c.first >> level, c.second >> level));
+    };
+    std::vector<int> slot(static_cast<std::size_t>(box.w * box.h), -1);
+    for (const auto& c : ij) slot[at(c)] = 0;
+    for (int& s : slot) s = s < 0 ? -1 : static_cast<int>(cells++);
+    for (std::size_t k = 0; k < ij.size(); ++k) slot_of[k] = slot[at(ij[k])];
+  } else {
+    std::vector<std::pair<std::int64_t, std::int64_t>> order;
+    for (const auto& [i, j] : ij) order.emplace_back(i >> level, j >> level);
+    std::sort(order.begin(), order.end());
+    order.erase(std::unique(order.begin(), order.end()), order.end());
+    absl::flat_hash_map<std::int64_t, int> slot;
+    for (const auto& [i, j] : order) slot.emplace(CellKey(i, j), static_cast<int>(cells++));
+    for (std::size_t k = 0; k < ij.size(); ++k) {
+      slot_of[k] = slot.at(CellKey(ij[k].first >> level, ij[k].second >> level));
+    }
   }
-  std::vector<Eigen::Vector3d> sum(order.size(), Eigen::Vector3d::Zero());
-  std::vector<int> count(order.size(), 0);
-  for (std::size_t k = 0; k < points.size(); ++k) {
-    if (keys[k] == kNoCell) continue;
-    const int c = slot.at(CoarserKey(keys[k], level));
-    sum[c] += points[k].cast<double>();
-    ++count[c];
+  std::vector<Eigen::Vector3d> sum(cells, Eigen::Vector3d::Zero());
+  std::vector<int> count(cells, 0);
+  for (std::size_t k = 0; k < ij.size(); ++k) {
+    sum[slot_of[k]] += points[valid[k]].cast<double>();
+    ++count[slot_of[k]];
   }
   std::vector<Eigen::Vector3f> samples;
-  samples.reserve(order.size());
-  for (std::size_t c = 0; c < order.size(); ++c) {
-    samples.push_back((sum[c] / count[c]).cast<float>());
-  }
+  samples.reserve(cells);
+  for (std::size_t c = 0; c < cells; ++c) samples.push_back((sum[c] / count[c]).cast<float>());
   return samples;
 }
 

@@ -119,14 +119,16 @@ int RecoverRingsAndAzimuths(const std::vector<LidarPoint>& scan, std::vector<int
     (*rings)[i] = ring;
   }
   const int count = scan.empty() ? 0 : ring + 1;
-  // Renumber by mean elevation, highest first, so rows go top to bottom.
+  // Renumber by mean slope z / r (elevation's tangent), highest first, so rows go top to bottom.
+  // A laser's points share one elevation up to noise, so this is the order of the elevations.
   std::vector<double> sum(count, 0.0);
   std::vector<std::size_t> num(count, 0);
   for (std::size_t i = 0; i < scan.size(); ++i) {
     const LidarPoint& p = scan[i];
-    const double r = std::hypot(p.x(), p.y());
-    if (!std::isfinite(r) || !std::isfinite(p.z()) || (r == 0 && p.z() == 0)) continue;
-    sum[(*rings)[i]] += std::atan2(p.z(), r);
+    const double x = p.x(), y = p.y();
+    const double r = std::sqrt(x * x + y * y);
+    if (!std::isfinite(r) || !std::isfinite(p.z()) || r == 0) continue;
+    sum[(*rings)[i]] += p.z() / r;
     ++num[(*rings)[i]];
   }
   std::vector<int> order(count);

@@ -44,8 +44,8 @@ OrganizedCloud ProjectToRangeImage(const std::vector<LidarPoint>& scan, const Se
                                    RangeProjectionStats* stats = nullptr);
 
 /// Ring index of every point from KITTI's point order (a new ring starts where the azimuth wraps
-/// by more than pi), renumbered so ring 0 has the highest mean elevation. Returns the number of
-/// rings; `rings` gets one index per point.
+/// by more than pi), renumbered so ring 0 has the highest mean slope z / r (the highest laser).
+/// Returns the number of rings; `rings` gets one index per point.
 int RecoverRings(const std::vector<LidarPoint>& scan, std::vector<int>* rings);
 
 /// Reads a .bin and projects it with the config (and its range limits).
