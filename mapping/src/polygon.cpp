@@ -486,14 +486,20 @@ RegionOutline ConcaveHull(const std::vector<Eigen::Vector2d>& points, const Poly
   const double tolerance = config.simplify_tolerance == 0.0
                                ? kAutoToleranceCells * grid.size.minCoeff()
                                : config.simplify_tolerance;
-  // A ring can lie only inside a ring enclosing more area: only those are tested.
+  // A ring can lie only inside a ring enclosing more area, and within its bounding box: only
+  // those are tested.
   std::vector<double> ring_area(rings.size());
-  for (std::size_t i = 0; i < rings.size(); ++i) ring_area[i] = std::abs(SignedArea(rings[i]));
+  std::vector<Eigen::AlignedBox2d> ring_box(rings.size());
+  for (std::size_t i = 0; i < rings.size(); ++i) {
+    ring_area[i] = std::abs(SignedArea(rings[i]));
+    for (const Eigen::Vector2d& v : rings[i]) ring_box[i].extend(v);
+  }
   for (std::size_t i = 0; i < rings.size(); ++i) {
     if (rings[i].size() < 3) continue;
     bool nested = false;
     for (std::size_t j = 0; j < rings.size() && !nested; ++j) {
       nested = ring_area[j] > ring_area[i] && rings[j].size() >= 3 &&
+               ring_box[j].contains(rings[i].front()) &&
                PointInPolygon(rings[i].front(), rings[j]);
     }
     if (nested) continue;
