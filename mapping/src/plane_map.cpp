@@ -258,7 +258,10 @@ PlaneObservation PlaneMap::MakeObservation(std::int64_t keyframe_id, const detec
 }
 
 std::vector<Eigen::Vector3d> PlaneMap::WorldSamples(const MapPlane& plane) const {
+  std::size_t count = 0;
+  for (const auto& obs : plane.observations) count += obs.samples_sensor.size();
   std::vector<Eigen::Vector3d> out;
+  out.reserve(count);
   for (const auto& obs : plane.observations) {
     const Pose& T = KeyframePose(obs.keyframe_id);
     for (const auto& s : obs.samples_sensor) out.push_back(T * s.cast<double>());
@@ -292,7 +295,10 @@ void PlaneMap::AddToExtent(Extent& extent, const std::vector<Eigen::Vector3d>& w
   const double coarse = config_.max_gap + extent.cell;
   for (const auto& p : world_points) {
     const Eigen::Vector2d xy = extent.basis.Project(p);
-    extent.fine.insert(CellKey(FloorIndex(xy.x(), extent.cell), FloorIndex(xy.y(), extent.cell)));
+    // A point in a known fine cell adds nothing: its coarse cell is known, and the box holds a
+    // point of its cell (what CountTouching's rejection by the box needs).
+    const std::int64_t i = FloorIndex(xy.x(), extent.cell), j = FloorIndex(xy.y(), extent.cell);
+    if (!extent.fine.insert(CellKey(i, j)).second) continue;
     extent.coarse.insert(CellKey(FloorIndex(xy.x(), coarse), FloorIndex(xy.y(), coarse)));
     extent.box.extend(xy);
   }
@@ -319,7 +325,7 @@ int PlaneMap::CountTouching(const Extent& extent, const std::vector<Eigen::Vecto
   const double radius = config_.max_gap + extent.cell * M_SQRT1_2;
   const double coarse = config_.max_gap + extent.cell;
   const int r = static_cast<int>(std::ceil(radius / extent.cell));
-  // Every occupied cell's centre lies within half a cell of the box of the points added.
+  // Every occupied cell's centre lies within a cell of the box (which holds a point of each).
   const double reach = radius + extent.cell;
   if (extent.box.isEmpty()) return 0;
   int touching = 0;

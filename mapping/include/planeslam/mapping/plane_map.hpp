@@ -212,7 +212,7 @@ class PlaneMap {
     // Open-addressing sets: the extents are rebuilt after every whole-graph optimisation.
     absl::flat_hash_set<std::int64_t> fine;    ///< cells of size `cell`
     absl::flat_hash_set<std::int64_t> coarse;  ///< cells of size max_gap (fast rejection)
-    Eigen::AlignedBox2d box;  ///< of the points added, in the basis (faster rejection)
+    Eigen::AlignedBox2d box;  ///< of a point of each fine cell, in the basis (faster rejection)
     /// To be built from the plane before use: built on demand, since after an optimisation most
     /// planes are never tested for touching before the next one moves them again.
     bool stale = true;
