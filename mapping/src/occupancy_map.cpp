@@ -395,7 +395,7 @@ class CellBitmap {
  public:
   /// Largest bitmap; a scan whose box needs more (far points and no max_range, rays sparse in
   /// the box) goes through a hash set instead.
-  static constexpr std::uint64_t kMaxBits = std::uint64_t{1} << 30;
+  static constexpr std::uint64_t kMaxBits = std::uint64_t{1} << 28;  // 32 MB, kept per thread
 
   /// Sizes the bitmap to the bricks covering the box [lo, hi] (inclusive) and clears it; false
   /// when it is too large.
