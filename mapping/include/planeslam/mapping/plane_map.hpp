@@ -209,7 +209,7 @@ class PlaneMap {
   struct Extent {
     PlaneBasis basis;
     double cell = 0.0;
-    // Open-addressing sets: the extents are rebuilt after every whole-graph optimisation.
+    // Open-addressing sets: an extent is rebuilt whenever an optimisation moves its plane.
     absl::flat_hash_set<std::int64_t> fine;    ///< cells of size `cell`
     absl::flat_hash_set<std::int64_t> coarse;  ///< cells of size max_gap (fast rejection)
     Eigen::AlignedBox2d box;  ///< of a point of each fine cell, in the basis (faster rejection)
