@@ -118,6 +118,13 @@ struct MortonTables {
 };
 constexpr MortonTables kMorton{};
 
+/// Morton index of the cell of packed key `key` within its brick.
+std::uint32_t MortonInBrick(std::uint64_t key) {
+  constexpr std::uint64_t kMask = (1u << kBrickBits) - 1;
+  return kMorton.spread[key & kMask] | kMorton.spread[key >> 16 & kMask] << 1 |
+         kMorton.spread[key >> 32 & kMask] << 2;
+}
+
 /// Cells whose log-odds are at the lower clamping bound, one bit each in bricks of 8 x 8 x 8:
 /// a miss there changes nothing (octomap's updateNode returns early), so it is skipped before
 /// the tree is searched. A free cell reached by many rays settles there after a few scans and
@@ -126,25 +133,20 @@ class SaturatedFreeCells {
  public:
   bool Contains(std::uint64_t key) {
     const std::uint64_t* block = Block(key, false);
-    const std::uint32_t m = CellIndex(key);
+    const std::uint32_t m = MortonInBrick(key);
     return block != nullptr && (block[m >> 6] >> (m & 63) & 1) != 0;
   }
   void Insert(std::uint64_t key) {
-    const std::uint32_t m = CellIndex(key);
+    const std::uint32_t m = MortonInBrick(key);
     Block(key, true)[m >> 6] |= std::uint64_t{1} << (m & 63);
   }
   void Erase(std::uint64_t key) {
     std::uint64_t* block = Block(key, false);
-    const std::uint32_t m = CellIndex(key);
+    const std::uint32_t m = MortonInBrick(key);
     if (block != nullptr) block[m >> 6] &= ~(std::uint64_t{1} << (m & 63));
   }
 
  private:
-  static std::uint32_t CellIndex(std::uint64_t key) {
-    constexpr std::uint64_t kMask = (1u << kBrickBits) - 1;
-    return kMorton.spread[key & kMask] | kMorton.spread[key >> 16 & kMask] << 1 |
-           kMorton.spread[key >> 32 & kMask] << 2;
-  }
   /// The bits of the brick holding `key`, created when asked to; null when absent. Consecutive
   /// look-ups mostly fall in one brick: the last one is kept.
   std::uint64_t* Block(std::uint64_t key, bool create) {
@@ -452,22 +454,18 @@ class CellBitmap {
   }
 
  private:
-  static std::uint32_t Morton(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
-    return kMorton.spread[x] | kMorton.spread[y] << 1 | kMorton.spread[z] << 2;
-  }
   static std::uint64_t CellOffset(std::uint32_t m) { return kMorton.offset[m]; }
   bool Bit(std::uint64_t key, std::uint64_t* bit) const {
-    std::uint32_t c[3], brick[3];
+    std::uint32_t brick[3];
     for (int a = 0; a < 3; ++a) {
-      c[a] = static_cast<std::uint32_t>(key >> (16 * a) & 0xffff);
       // Wraps when below the box: one compare.
-      brick[a] = (c[a] >> kBrickBits) - brick_lo_[a];
+      const auto coordinate = static_cast<std::uint32_t>(key >> (16 * a) & 0xffff);
+      brick[a] = (coordinate >> kBrickBits) - brick_lo_[a];
       if (brick[a] >= bricks_[a]) return false;
     }
-    constexpr std::uint32_t kMask = (1u << kBrickBits) - 1;
     const std::uint64_t index =
         (std::uint64_t{brick[2]} * bricks_[1] + brick[1]) * bricks_[0] + brick[0];
-    *bit = index * kBrickCells + Morton(c[0] & kMask, c[1] & kMask, c[2] & kMask);
+    *bit = index * kBrickCells + MortonInBrick(key);
     return true;
   }
 
