@@ -161,9 +161,10 @@ Linearized Linearize(const MatchData& m, const Eigen::Matrix3d& R, const Eigen::
   // the weights, the exact solution does not depend on it.
   sr += Eigen::Matrix3d::Identity() * 1e-18;
   lin.cov = sr;
-  if (std::min(fn2, fd2) > 1e-12) {
+  Eigen::Matrix3d L;
+  if (std::min(fn2, fd2) > 1e-12 && Cholesky3(sr, &L)) {
     // The floors keep every eigenvalue of sr at least 2 min(fn2, fd2): a Cholesky inverse.
-    lin.W = sr.llt().solve(Eigen::Matrix3d::Identity());
+    lin.W = InverseFromCholesky3(L);
     return lin;
   }
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
