@@ -569,8 +569,7 @@ MapAlignmentResult AlignToLocalMap(const LocalVoxelMap& map, const Pose& T_world
       return res;
     }
     y += step;
-    // Converged once a step moves under 0.1 mm and 0.1 mrad, far inside the pairs' noise.
-    if (step.norm() < 1e-4) {
+    if (step.norm() < 1e-5) {
       res.converged = true;
       break;
     }
