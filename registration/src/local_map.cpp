@@ -42,8 +42,10 @@ std::vector<ScanPoint> StructurePoints(const datasets::OrganizedCloud& cloud,
 
 namespace {
 
-Eigen::Vector3i VoxelOf(const Eigen::Vector3d& p, double voxel) {
-  return {FloorToInt(p.x() / voxel), FloorToInt(p.y() / voxel), FloorToInt(p.z() / voxel)};
+/// The voxel of edge `voxel` holding p; `inverse` is 1 / voxel.
+Eigen::Vector3i VoxelOf(const Eigen::Vector3d& p, double voxel, double inverse) {
+  return {FloorDivToInt(p.x(), voxel, inverse), FloorDivToInt(p.y(), voxel, inverse),
+          FloorDivToInt(p.z(), voxel, inverse)};
 }
 
 /// The unit eigenvector of the symmetric `C` for its simple eigenvalue `lambda`: the largest
@@ -175,13 +177,14 @@ std::vector<ShapedPoint> ShapePoints(const std::vector<ScanPoint>& points, doubl
   // and a bitmap of occupied voxels by hash: most of a voxel's 26 neighbours are empty, and the
   // bitmap, small enough to stay in the first-level cache, turns them away without a probe.
   VoxelIndex index(points.size() / 2);
+  const double inverse = 1.0 / radius;
   VoxelBitmap<16> occupied;  // 8 KiB
   voxel_of.resize(points.size());
   start.clear();
   keys.clear();
   for (std::size_t i = 0; i < points.size(); ++i) {
     bool inserted = false;
-    const Eigen::Vector3i key = VoxelOf(points[i].position, radius);
+    const Eigen::Vector3i key = VoxelOf(points[i].position, radius, inverse);
     voxel_of[i] = index.Insert(key, &inserted);
     if (inserted) {
       start.push_back(0);
@@ -250,10 +253,11 @@ template <typename Point>
 std::vector<Point> FirstPerVoxel(const std::vector<Point>& points, double voxel) {
   if (!(voxel > 0)) return points;
   VoxelIndex seen(points.size() / 2);
+  const double inverse = 1.0 / voxel;
   std::vector<Point> out;
   for (const auto& p : points) {
     bool inserted = false;
-    seen.Insert(VoxelOf(p.position, voxel), &inserted);
+    seen.Insert(VoxelOf(p.position, voxel, inverse), &inserted);
     if (inserted) out.push_back(p);
   }
   return out;
@@ -274,6 +278,7 @@ std::vector<ShapedPoint> ScanStructure(const datasets::OrganizedCloud& cloud,
   // VoxelDownsample(StructurePoints(cloud, labels), voxel / 2) in one pass over the cloud.
   const bool use_labels = labels != nullptr && labels->size() == cloud.points.size();
   const double thin = 0.5 * voxel;
+  const double inverse = 1.0 / thin;
   VoxelIndex seen(cloud.points.size() / 16);
   std::vector<ScanPoint> thinned;
   thinned.reserve(cloud.points.size() / 8);
@@ -286,7 +291,7 @@ std::vector<ShapedPoint> ScanStructure(const datasets::OrganizedCloud& cloud,
       const Eigen::Vector3f& p = cloud.points[i];
       if (!p.allFinite() || (use_labels && (*labels)[i] >= 1)) continue;
       const Eigen::Vector3d position = p.cast<double>();
-      const Eigen::Vector3i key = VoxelOf(position, thin);
+      const Eigen::Vector3i key = VoxelOf(position, thin, inverse);
       if (key == last) continue;
       last = key;
       bool inserted = false;
@@ -351,7 +356,9 @@ double ScanReach(const datasets::OrganizedCloud& cloud) {
 LocalVoxelMap::LocalVoxelMap(double voxel_size, int max_points_per_voxel)
     : voxel_(voxel_size > 0 ? voxel_size : 1.0), max_points_(std::max(1, max_points_per_voxel)) {}
 
-Eigen::Vector3i LocalVoxelMap::Key(const Eigen::Vector3d& p) const { return VoxelOf(p, voxel_); }
+Eigen::Vector3i LocalVoxelMap::Key(const Eigen::Vector3d& p) const {
+  return VoxelOf(p, voxel_, 1.0 / voxel_);
+}
 
 std::size_t LocalVoxelMap::size() const {
   std::size_t n = 0;

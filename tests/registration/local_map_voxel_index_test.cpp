@@ -1,9 +1,10 @@
-// The local map's voxel hash against std::unordered_map on random keys, through growth, and
-// its bitmap of occupied voxels.
+// The local map's voxel hash against std::unordered_map on random keys, through growth, its
+// bitmap of occupied voxels, and the voxel coordinate taken without a division.
 #include "planeslam/registration/voxel_index.hpp"
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <map>
 #include <random>
 #include <tuple>
@@ -65,4 +66,30 @@ TEST(LocalMapVoxelIndex, BitmapHasNoFalseClearsAndFewFalseSets) {
 }
 
 }  // namespace
+// FloorDivToInt must be exactly FloorToInt(x / size): over random sizes and coordinates, and
+// at coordinates on and one ulp either side of voxel boundaries, where the product and the
+// quotient round differently most often. No failure allowed.
+TEST(LocalMapVoxelIndex, FloorWithoutDivisionIsTheQuotientsFloor) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> log_size(std::log(0.001), std::log(10.0));
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  std::uniform_int_distribution<int> cell(-200000, 200000);
+  int boundary_draws = 0, product_off = 0;
+  for (int draw = 0; draw < 200000; ++draw) {
+    const double size = std::exp(log_size(rng));
+    const double inverse = 1.0 / size;
+    const double on_boundary = cell(rng) * size;
+    for (const double x : {unit(rng) * 2000.0, on_boundary, std::nextafter(on_boundary, -1e300),
+                           std::nextafter(on_boundary, 1e300)}) {
+      const int expected = FloorToInt(x / size);
+      ASSERT_EQ(FloorDivToInt(x, size, inverse), expected)
+          << "x " << x << " size " << size << " draw " << draw;
+      product_off += FloorToInt(x * inverse) != expected ? 1 : 0;
+    }
+    ++boundary_draws;
+  }
+  // The boundary cases must include ones where the plain product would have been wrong.
+  EXPECT_GT(product_off, 0) << boundary_draws << " draws";
+}
+
 }  // namespace planeslam::registration

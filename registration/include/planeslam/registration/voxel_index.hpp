@@ -19,6 +19,20 @@ inline int FloorToInt(double x) {
   return truncated - (static_cast<double>(truncated) > x ? 1 : 0);
 }
 
+/// floor(x / size) as an int, given inverse = 1 / size, without a division: x * inverse lies within
+/// three units in the last place of the quotient, so the two floors can differ only within 1e-6
+/// of an integer (for quotients under 1e9), where the division decides. Always the value of
+/// FloorToInt(x / size).
+inline int FloorDivToInt(double x, double size, double inverse) {
+  const double t = x * inverse;
+  if (t > -1e9 && t < 1e9) {
+    const int k = FloorToInt(t);
+    const double fraction = t - static_cast<double>(k);
+    if (fraction > 1e-6 && fraction < 1.0 - 1e-6) return k;
+  }
+  return FloorToInt(x / size);
+}
+
 /// The spatial hash of Teschner et al. 2003 of a voxel key, in 32 bits.
 inline std::uint32_t SpatialHash(const Eigen::Vector3i& key) {
   return static_cast<std::uint32_t>(key.x()) * 73856093u ^
