@@ -375,7 +375,7 @@ class Verifier {
         internal::Linearize(match_data_[static_cast<std::size_t>(k)], R, t, rc_);
     const Eigen::Matrix3d s = lin.cov + lin.J * cov * lin.J.transpose();
     Eigen::Matrix3d L;
-    const double c2 = internal::Cholesky3(s, &L)
+    const double c2 = Cholesky3(s, &L)
                           ? L.triangularView<Eigen::Lower>().solve(lin.r).squaredNorm()
                           : lin.r.dot(s.ldlt().solve(lin.r));
     return std::isfinite(c2) ? c2 : std::numeric_limits<double>::infinity();

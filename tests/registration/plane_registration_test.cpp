@@ -6,6 +6,7 @@
 #include <Eigen/Eigenvalues>
 
 #include <algorithm>
+#include <cmath>
 #include <numeric>
 #include <random>
 #include <vector>
@@ -60,6 +61,33 @@ Scene MakeScene(const std::vector<detection::Plane>& curr_planes, const Pose& T_
   }
   std::shuffle(s.matches.begin(), s.matches.end(), rng);
   return s;
+}
+
+// The written-out 3x3 Cholesky factor and inverse against Eigen's LLT, over random symmetric
+// positive definite matrices of condition up to 1e8 (fixed seed, 2000 draws, no failure
+// allowed), and refused on indefinite, zero and NaN ones.
+TEST(PlaneRegistration, CholeskyOfThreeByThreeMatchesEigen) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> log_lambda(std::log(1e-6), std::log(1e2));
+  for (int draw = 0; draw < 2000; ++draw) {
+    const Eigen::Matrix3d Q = RandomPose(rng, 1.0, 3.14).linear();
+    const Eigen::Vector3d lambda(std::exp(log_lambda(rng)), std::exp(log_lambda(rng)),
+                                 std::exp(log_lambda(rng)));
+    const Eigen::Matrix3d A = Q * lambda.asDiagonal() * Q.transpose();
+    Eigen::Matrix3d L;
+    ASSERT_TRUE(Cholesky3(A, &L)) << "draw " << draw;
+    EXPECT_LE((L * L.transpose() - A).norm(), 1e-12 * A.norm()) << "draw " << draw;
+    const Eigen::Matrix3d inverse = A.llt().solve(Eigen::Matrix3d::Identity());
+    EXPECT_LE((InverseFromCholesky3(L) - inverse).norm(), 1e-6 * inverse.norm())
+        << "draw " << draw << " condition " << lambda.maxCoeff() / lambda.minCoeff();
+    // One eigenvalue flipped below zero: not positive definite.
+    Eigen::Vector3d flipped = lambda;
+    flipped(draw % 3) = -lambda(draw % 3);
+    EXPECT_FALSE(Cholesky3(Q * flipped.asDiagonal() * Q.transpose(), &L)) << "draw " << draw;
+  }
+  Eigen::Matrix3d L;
+  EXPECT_FALSE(Cholesky3(Eigen::Matrix3d::Zero(), &L));
+  EXPECT_FALSE(Cholesky3(Eigen::Matrix3d::Constant(std::nan("")), &L));
 }
 
 TEST(PlaneRegistration, ExactRecoveryFromNoiseFreePlanes) {

@@ -10,6 +10,7 @@
 /// order, so a covariance from here can be inverted and used there without conversion.
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <cmath>
 
 #include "planeslam/datasets/trajectory.hpp"
 
@@ -85,6 +86,35 @@ inline Eigen::Matrix4d TransformPlaneJacobian(const Pose& T_a_b) {
   j.bottomLeftCorner<1, 3>() = T_a_b.translation().transpose() * T_a_b.linear();
   j(3, 3) = 1.0;
   return j;
+}
+
+/// The lower Cholesky factor L (A = L L^T) of a symmetric 3x3 A, written out: Eigen's LLT
+/// solves a matrix right-hand side with its general blocked kernel, which costs more than the
+/// factorisation itself at this size. False when A is not positive definite.
+inline bool Cholesky3(const Eigen::Matrix3d& A, Eigen::Matrix3d* L) {
+  const double l00 = A(0, 0) > 0 ? std::sqrt(A(0, 0)) : 0.0;
+  if (!(l00 > 0)) return false;
+  const double l10 = A(1, 0) / l00, l20 = A(2, 0) / l00;
+  const double d1 = A(1, 1) - l10 * l10;
+  if (!(d1 > 0)) return false;
+  const double l11 = std::sqrt(d1);
+  const double l21 = (A(2, 1) - l20 * l10) / l11;
+  const double d2 = A(2, 2) - l20 * l20 - l21 * l21;
+  if (!(d2 > 0)) return false;
+  *L << l00, 0, 0, l10, l11, 0, l20, l21, std::sqrt(d2);
+  return true;
+}
+
+/// A^-1 = L^-T L^-1 from A's Cholesky factor L.
+inline Eigen::Matrix3d InverseFromCholesky3(const Eigen::Matrix3d& L) {
+  Eigen::Matrix3d Li = Eigen::Matrix3d::Zero();  // L^-1, lower triangular
+  Li(0, 0) = 1.0 / L(0, 0);
+  Li(1, 1) = 1.0 / L(1, 1);
+  Li(2, 2) = 1.0 / L(2, 2);
+  Li(1, 0) = -L(1, 0) * Li(0, 0) * Li(1, 1);
+  Li(2, 1) = -L(2, 1) * Li(1, 1) * Li(2, 2);
+  Li(2, 0) = -(L(2, 0) * Li(0, 0) + L(2, 1) * Li(1, 0)) * Li(2, 2);
+  return Li.transpose() * Li;
 }
 
 }  // namespace planeslam::registration
