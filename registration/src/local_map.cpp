@@ -354,10 +354,12 @@ double ScanReach(const datasets::OrganizedCloud& cloud) {
 }
 
 LocalVoxelMap::LocalVoxelMap(double voxel_size, int max_points_per_voxel)
-    : voxel_(voxel_size > 0 ? voxel_size : 1.0), max_points_(std::max(1, max_points_per_voxel)) {}
+    : voxel_(voxel_size > 0 ? voxel_size : 1.0),
+      inverse_voxel_(1.0 / voxel_),
+      max_points_(std::max(1, max_points_per_voxel)) {}
 
 Eigen::Vector3i LocalVoxelMap::Key(const Eigen::Vector3d& p) const {
-  return VoxelOf(p, voxel_, 1.0 / voxel_);
+  return VoxelOf(p, voxel_, inverse_voxel_);
 }
 
 std::size_t LocalVoxelMap::size() const {

@@ -161,17 +161,22 @@ Linearized Linearize(const MatchData& m, const Eigen::Matrix3d& R, const Eigen::
   // the weights, the exact solution does not depend on it.
   sr += Eigen::Matrix3d::Identity() * 1e-18;
   lin.cov = sr;
+  return lin;
+}
+
+Eigen::Matrix3d ResidualWeight(const Eigen::Matrix3d& cov, const RegistrationConfig& config) {
+  const double fn2 = config.min_normal_sigma * config.min_normal_sigma;
+  const double fd2 = config.min_offset_sigma * config.min_offset_sigma;
   Eigen::Matrix3d L;
-  if (std::min(fn2, fd2) > 1e-12 && Cholesky3(sr, &L)) {
-    // The floors keep every eigenvalue of sr at least 2 min(fn2, fd2): a Cholesky inverse.
-    lin.W = InverseFromCholesky3(L);
-    return lin;
+  if (std::min(fn2, fd2) > 1e-12 && Cholesky3(cov, &L)) {
+    // Linearize's floors keep every eigenvalue of cov at least 2 min(fn2, fd2): a Cholesky
+    // inverse.
+    return InverseFromCholesky3(L);
   }
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
-  es.computeDirect(sr);
+  es.computeDirect(cov);
   const Eigen::Vector3d ev = es.eigenvalues().cwiseMax(1e-18);
-  lin.W = es.eigenvectors() * ev.cwiseInverse().asDiagonal() * es.eigenvectors().transpose();
-  return lin;
+  return es.eigenvectors() * ev.cwiseInverse().asDiagonal() * es.eigenvectors().transpose();
 }
 
 }  // namespace internal
@@ -225,10 +230,11 @@ Accumulated Accumulate(const std::vector<MatchData>& data, const Eigen::Matrix3d
   Accumulated acc;
   for (const MatchData& m : data) {
     const Linearized lin = internal::Linearize(m, R, t, config);
-    const Eigen::Matrix<double, 6, 3> jtw = lin.J.transpose() * lin.W;
+    const Eigen::Matrix3d W = internal::ResidualWeight(lin.cov, config);
+    const Eigen::Matrix<double, 6, 3> jtw = lin.J.transpose() * W;
     acc.H.noalias() += jtw * lin.J;
     acc.g.noalias() += jtw * lin.r;
-    acc.chi2 += lin.r.dot(lin.W * lin.r);
+    acc.chi2 += lin.r.dot(W * lin.r);
     acc.sum_sq_offset += lin.r(2) * lin.r(2);
     const double c = std::clamp(m.n_a.dot(R * m.n_b), -1.0, 1.0);
     acc.sum_sq_angle += std::acos(c) * std::acos(c);

@@ -19,12 +19,11 @@ struct MatchData {
   Eigen::Matrix<double, 3, 2> tangent;  ///< orthonormal basis orthogonal to n_a
 };
 
-/// Residual r (3), its Jacobian over (dt, dtheta), its covariance and inverse.
+/// Residual r (3), its Jacobian over (dt, dtheta) and its covariance.
 struct Linearized {
   Eigen::Vector3d r = Eigen::Vector3d::Zero();
   Eigen::Matrix<double, 3, 6> J = Eigen::Matrix<double, 3, 6>::Zero();
   Eigen::Matrix3d cov = Eigen::Matrix3d::Identity();
-  Eigen::Matrix3d W = Eigen::Matrix3d::Identity();
 };
 
 /// False when either plane is unusable (non-finite); CheckError on bad indices.
@@ -34,6 +33,10 @@ bool MakeMatchData(const std::vector<detection::Plane>& prev,
 
 Linearized Linearize(const MatchData& m, const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
                      const RegistrationConfig& config);
+
+/// The residual's information matrix, cov^-1 (only the least squares weigh by it; the other
+/// callers of Linearize read cov).
+Eigen::Matrix3d ResidualWeight(const Eigen::Matrix3d& cov, const RegistrationConfig& config);
 
 /// RegisterPlanes on matches already in residual form (those RegisterPlanes would keep, in the
 /// order of its matches): the association solves many subsets of one candidate set.

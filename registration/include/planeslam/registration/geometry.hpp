@@ -92,8 +92,8 @@ inline Eigen::Matrix4d TransformPlaneJacobian(const Pose& T_a_b) {
 /// solves a matrix right-hand side with its general blocked kernel, which costs more than the
 /// factorisation itself at this size. False when A is not positive definite.
 inline bool Cholesky3(const Eigen::Matrix3d& A, Eigen::Matrix3d* L) {
-  const double l00 = A(0, 0) > 0 ? std::sqrt(A(0, 0)) : 0.0;
-  if (!(l00 > 0)) return false;
+  if (!(A(0, 0) > 0)) return false;
+  const double l00 = std::sqrt(A(0, 0));
   const double l10 = A(1, 0) / l00, l20 = A(2, 0) / l00;
   const double d1 = A(1, 1) - l10 * l10;
   if (!(d1 > 0)) return false;

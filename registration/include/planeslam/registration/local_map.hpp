@@ -129,6 +129,7 @@ class LocalVoxelMap {
   Eigen::Vector3i Key(const Eigen::Vector3d& p) const;
 
   double voxel_;
+  double inverse_voxel_;  ///< 1 / voxel_, for Key
   int max_points_;
   VoxelIndex index_;                         ///< voxel -> index into keys_ and cells_
   VoxelBitmap<20> occupied_;                 ///< the voxels of index_ (128 KiB)
