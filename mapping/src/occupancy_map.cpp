@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <deque>
@@ -22,7 +23,18 @@
 #include <octomap/OcTree.h>
 #endif
 
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
+
 namespace planeslam::mapping {
+namespace {
+std::atomic<bool> vector_ray_walk{true};  // internal::SetVectorRayWalk
+}  // namespace
+
+namespace internal {
+void SetVectorRayWalk(bool enabled) { vector_ray_walk.store(enabled); }
+}  // namespace internal
 
 std::vector<std::string> OccupancyMapConfig::Validate() const {
   std::vector<std::string> problems;
@@ -347,18 +359,19 @@ class RayWalk {
   }
 
   std::uint64_t cell_ = 0, end_cell_ = 0;  // packed keys
-  std::uint64_t step_[3] = {0, 0, 0};       // packed, two's complement for -1
+  std::uint64_t step_[3] = {0, 0, 0};      // packed, two's complement for -1
   double t_max_[3] = {0, 0, 0}, t_delta_[3] = {0, 0, 0};
   float length_ = 0;
   int axis_ = 0;
+
+  friend class RayLanes;
 };
 
-/// Calls visit(packed key) for every cell computeRayKeys(origin, end) returns, for every end in
-/// `ends` (each cell as often as it lies on a ray, in no particular order). A walk is a chain of
-/// dependent steps, so kLanes rays are walked side by side for the processor to overlap them.
+/// WalkRays (below) without vector instructions. A walk is a chain of dependent steps, so kLanes
+/// rays are walked side by side for the processor to overlap them.
 template <typename Visit>
-void WalkRays(const octomap::OcTree& keys, const octomap::point3d& origin,
-              const std::vector<octomap::point3d>& ends, Visit&& visit) {
+void WalkRaysScalar(const octomap::OcTree& keys, const octomap::point3d& origin,
+                    const std::vector<octomap::point3d>& ends, Visit&& visit) {
   constexpr int kLanes = 8;
   RayWalk lanes[kLanes];
   bool active[kLanes] = {};
@@ -385,6 +398,148 @@ void WalkRays(const octomap::OcTree& keys, const octomap::point3d& origin,
       }
     }
   }
+}
+
+#if defined(__x86_64__)
+bool HasAvx2() {
+  static const bool avx2 = __builtin_cpu_supports("avx2");
+  return avx2 && vector_ray_walk.load(std::memory_order_relaxed);
+}
+
+__attribute__((target("avx2"))) inline __m256d LoadLanes(const double* p) {
+  return _mm256_load_pd(p);
+}
+__attribute__((target("avx2"))) inline __m256i LoadLanes(const std::uint64_t* p) {
+  return _mm256_load_si256(reinterpret_cast<const __m256i*>(p));
+}
+
+/// Four RayWalks in the lanes of AVX2 registers, stepped together: each lane takes exactly the
+/// scalar walk's steps (the same double additions and comparisons, octomap's tie-breaking), so
+/// the lanes visit the same cells, in another order across rays.
+class RayLanes {
+ public:
+  /// Loads lane `lane` from a started walk, or parks it (no steps, never visits) when null.
+  void Set(int lane, const RayWalk* walk) {
+    for (int a = 0; a < 3; ++a) {
+      t_[a][lane] = walk ? walk->t_max_[a] : 0.0;
+      delta_[a][lane] = walk ? walk->t_delta_[a] : 0.0;
+      step_[a][lane] = walk ? walk->step_[a] : 0;
+      axis_[a][lane] = walk && walk->axis_ == a ? ~std::uint64_t{0} : 0;
+    }
+    cell_[lane] = walk ? walk->cell_ : 0;
+    end_[lane] = walk ? walk->end_cell_ : 1;
+    length_[lane] = walk ? walk->length_ : 0.0;
+    active_ &= ~(1u << lane);
+    if (walk) active_ |= 1u << lane;
+  }
+  unsigned active() const { return active_; }
+
+  /// One step of every lane (RayWalk::Advance): the cells stepped into in `cells`; returns the
+  /// lanes whose walk goes on (their cell is to be visited) and sets *ended to the active lanes
+  /// whose walk has ended.
+  __attribute__((target("avx2"))) unsigned Advance(std::uint64_t cells[4], unsigned* ended) {
+    const __m256i mx = LoadLanes(axis_[0]), my = LoadLanes(axis_[1]), mz = LoadLanes(axis_[2]);
+    __m256i cell =
+        _mm256_add_epi64(LoadLanes(cell_),
+                         _mm256_or_si256(_mm256_or_si256(_mm256_and_si256(LoadLanes(step_[0]), mx),
+                                                         _mm256_and_si256(LoadLanes(step_[1]), my)),
+                                         _mm256_and_si256(LoadLanes(step_[2]), mz)));
+    // t + 0.0 is t: the lanes not stepping along an axis keep their t exactly.
+    const __m256d tx = _mm256_add_pd(LoadLanes(t_[0]),
+                                     _mm256_and_pd(LoadLanes(delta_[0]), _mm256_castsi256_pd(mx)));
+    const __m256d ty = _mm256_add_pd(LoadLanes(t_[1]),
+                                     _mm256_and_pd(LoadLanes(delta_[1]), _mm256_castsi256_pd(my)));
+    const __m256d tz = _mm256_add_pd(LoadLanes(t_[2]),
+                                     _mm256_and_pd(LoadLanes(delta_[2]), _mm256_castsi256_pd(mz)));
+    const __m256i at_end = _mm256_cmpeq_epi64(cell, LoadLanes(end_));
+    // NextAxis: first = t0 < t1 ? 0 : 1, then first if t[first] < t2, else 2.
+    const __m256d x_first = _mm256_cmp_pd(tx, ty, _CMP_LT_OQ);
+    const __m256d t_first = _mm256_blendv_pd(ty, tx, x_first);
+    const __m256d not_z = _mm256_cmp_pd(t_first, tz, _CMP_LT_OQ);
+    const __m256d t_next = _mm256_blendv_pd(tz, t_first, not_z);
+    const __m256d past = _mm256_cmp_pd(t_next, LoadLanes(length_), _CMP_GT_OQ);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(axis_[0]),
+                       _mm256_castpd_si256(_mm256_and_pd(x_first, not_z)));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(axis_[1]),
+                       _mm256_castpd_si256(_mm256_andnot_pd(x_first, not_z)));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(axis_[2]),
+                       _mm256_castpd_si256(_mm256_cmp_pd(t_first, tz, _CMP_NLT_UQ)));
+    _mm256_store_pd(t_[0], tx);
+    _mm256_store_pd(t_[1], ty);
+    _mm256_store_pd(t_[2], tz);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(cell_), cell);
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(cells), cell);
+    const unsigned stop = static_cast<unsigned>(_mm256_movemask_pd(_mm256_castsi256_pd(at_end))) |
+                          static_cast<unsigned>(_mm256_movemask_pd(past));
+    *ended = stop & active_;
+    return ~stop & active_;
+  }
+
+ private:
+  alignas(32) double t_[3][4] = {};
+  alignas(32) double delta_[3][4] = {};
+  alignas(32) std::uint64_t step_[3][4] = {};
+  alignas(32) std::uint64_t axis_[3][4] = {};  // all ones on the axis stepped next
+  alignas(32) std::uint64_t cell_[4] = {};
+  alignas(32) std::uint64_t end_[4] = {1, 1, 1, 1};
+  alignas(32) double length_[4] = {};
+  unsigned active_ = 0;
+};
+
+/// WalkRaysScalar with two sets of four lanes stepped by RayLanes: a ray's first cell goes to
+/// visit(key), the cells stepped into to visit_lanes(keys[4], lanes to visit).
+template <typename Visit, typename VisitLanes>
+__attribute__((target("avx2"))) void WalkRaysAvx2(const octomap::OcTree& keys,
+                                                  const octomap::point3d& origin,
+                                                  const std::vector<octomap::point3d>& ends,
+                                                  Visit&& visit, VisitLanes&& visit_lanes) {
+  constexpr int kGroups = 2;
+  RayLanes groups[kGroups];
+  RayWalk walk;
+  std::size_t next = 0;
+  std::uint64_t first;
+  const auto start = [&](RayLanes& lanes, int lane) {
+    while (next < ends.size()) {
+      if (walk.Start(keys, origin, ends[next++], &first)) {
+        visit(first);
+        lanes.Set(lane, &walk);
+        return;
+      }
+    }
+    lanes.Set(lane, nullptr);
+  };
+  for (RayLanes& lanes : groups) {
+    for (int lane = 0; lane < 4; ++lane) start(lanes, lane);
+  }
+  alignas(32) std::uint64_t cells[4];
+  for (;;) {
+    unsigned any = 0;
+    for (RayLanes& lanes : groups) {
+      if (lanes.active() == 0) continue;
+      any = 1;
+      unsigned ended = 0;
+      visit_lanes(cells, lanes.Advance(cells, &ended));
+      for (; ended != 0; ended &= ended - 1) start(lanes, __builtin_ctz(ended));
+    }
+    if (!any) return;
+  }
+}
+#endif
+
+/// Calls visit(packed key) for every cell computeRayKeys(origin, end) returns, for every end in
+/// `ends` (each cell as often as it lies on a ray, in no particular order).
+template <typename Visit>
+void WalkRays(const octomap::OcTree& keys, const octomap::point3d& origin,
+              const std::vector<octomap::point3d>& ends, Visit&& visit) {
+#if defined(__x86_64__)
+  if (HasAvx2()) {
+    return WalkRaysAvx2(keys, origin, ends, visit,
+                        [&](const std::uint64_t cells[4], unsigned lanes) {
+                          for (; lanes != 0; lanes &= lanes - 1) visit(cells[__builtin_ctz(lanes)]);
+                        });
+  }
+#endif
+  WalkRaysScalar(keys, origin, ends, visit);
 }
 
 /// A scan's free cells as one bit per cell of the box of keys its rays span. Marking a cell is a
@@ -415,9 +570,55 @@ class CellBitmap {
   }
   void Set(std::uint64_t key) {
     std::uint64_t bit;
-    if (Bit(key, &bit)) words_[bit >> 6] |= std::uint64_t{1} << (bit & 63);
-    else outside_.push_back(key);
+    if (Bit(key, &bit))
+      words_[bit >> 6] |= std::uint64_t{1} << (bit & 63);
+    else
+      outside_.push_back(key);
   }
+#if defined(__x86_64__)
+  /// Set of the keys in `lanes` of `keys` (AVX2): Bit for four keys at once.
+  __attribute__((target("avx2"))) void SetLanes(const std::uint64_t keys[4], unsigned lanes) {
+    const __m256i key = LoadLanes(keys);
+    const __m256i field = _mm256_set1_epi64x(0xffff), low = _mm256_set1_epi64x(7);
+    __m256i coordinate[3], brick[3];
+    __m256i inside = _mm256_set1_epi64x(-1);
+    for (int a = 0; a < 3; ++a) {
+      coordinate[a] = _mm256_and_si256(_mm256_srli_epi64(key, 16 * a), field);
+      brick[a] = _mm256_sub_epi64(_mm256_srli_epi64(coordinate[a], kBrickBits),
+                                  _mm256_set1_epi64x(brick_lo_[a]));
+      // 0 <= brick < bricks: the scalar Bit's unsigned compare.
+      inside = _mm256_andnot_si256(_mm256_cmpgt_epi64(_mm256_setzero_si256(), brick[a]), inside);
+      inside =
+          _mm256_and_si256(_mm256_cmpgt_epi64(_mm256_set1_epi64x(bricks_[a]), brick[a]), inside);
+    }
+    const __m256i index = _mm256_add_epi64(
+        _mm256_mul_epu32(
+            _mm256_add_epi64(_mm256_mul_epu32(brick[2], _mm256_set1_epi64x(bricks_[1])), brick[1]),
+            _mm256_set1_epi64x(bricks_[0])),
+        brick[0]);
+    // Morton within the brick: bit b of the axis a coordinate at 3b + a.
+    __m256i morton = _mm256_setzero_si256();
+    for (int a = 0; a < 3; ++a) {
+      const __m256i v = _mm256_and_si256(coordinate[a], low);
+      const __m256i spread = _mm256_or_si256(
+          _mm256_and_si256(v, _mm256_set1_epi64x(1)),
+          _mm256_or_si256(_mm256_slli_epi64(_mm256_and_si256(v, _mm256_set1_epi64x(2)), 2),
+                          _mm256_slli_epi64(_mm256_and_si256(v, _mm256_set1_epi64x(4)), 4)));
+      morton = _mm256_or_si256(morton, _mm256_slli_epi64(spread, a));
+    }
+    alignas(32) std::uint64_t bits[4];
+    _mm256_store_si256(reinterpret_cast<__m256i*>(bits),
+                       _mm256_or_si256(_mm256_slli_epi64(index, 3 * kBrickBits), morton));
+    const auto in_box = static_cast<unsigned>(_mm256_movemask_pd(_mm256_castsi256_pd(inside)));
+    for (unsigned set = lanes & in_box; set != 0; set &= set - 1) {
+      const std::uint64_t bit = bits[__builtin_ctz(set)];
+      words_[bit >> 6] |= std::uint64_t{1} << (bit & 63);
+    }
+    for (unsigned out = lanes & ~in_box; out != 0; out &= out - 1) {
+      outside_.push_back(keys[__builtin_ctz(out)]);
+    }
+  }
+#endif
   void Clear(std::uint64_t key) {
     std::uint64_t bit;
     if (Bit(key, &bit)) words_[bit >> 6] &= ~(std::uint64_t{1} << (bit & 63));
@@ -526,8 +727,7 @@ ScanRays CollectRays(const octomap::OcTree& keys, const OccupancyMapConfig& conf
 /// Free cells of the rays through a hash set, for scans whose box is too large for a bitmap.
 std::vector<std::uint64_t> FreeCellsBySet(const octomap::OcTree& keys, const ScanRays& rays) {
   PackedKeySet free_cells;
-  WalkRays(keys, rays.origin, rays.ends,
-           [&](std::uint64_t cell) { free_cells.Insert(cell); });
+  WalkRays(keys, rays.origin, rays.ends, [&](std::uint64_t cell) { free_cells.Insert(cell); });
   std::vector<std::uint64_t> cells = free_cells.TakeSorted();
   std::vector<std::uint64_t> kept;
   kept.reserve(cells.size());
@@ -556,7 +756,18 @@ ScanUpdate ComputeScanUpdate(const OccupancyMapConfig& config,
   // Kept per thread: clearing memory already mapped is cheaper than mapping it afresh.
   thread_local CellBitmap bitmap;
   if (bitmap.Reset(rays.lo, rays.hi)) {
-    WalkRays(keys, rays.origin, rays.ends, [&](std::uint64_t cell) { bitmap.Set(cell); });
+    const auto set = [&](std::uint64_t cell) { bitmap.Set(cell); };
+#if defined(__x86_64__)
+    if (HasAvx2()) {
+      WalkRaysAvx2(
+          keys, rays.origin, rays.ends, set,
+          [&](const std::uint64_t cells[4], unsigned lanes) { bitmap.SetLanes(cells, lanes); });
+    } else {
+      WalkRays(keys, rays.origin, rays.ends, set);
+    }
+#else
+    WalkRays(keys, rays.origin, rays.ends, set);
+#endif
     for (std::uint64_t hit : rays.hits) bitmap.Clear(hit);
     update.free_cells = bitmap.Keys();
   } else {

@@ -186,11 +186,8 @@ std::string FileBytes(const std::string& path) {
   return std::string(std::istreambuf_iterator<char>(in), {});
 }
 
-// The builder's own ray casting and lazy updates against OctoMap's insertPointCloud (discretized,
-// lazy), bit for bit in the written file: random rooms seen from random places, at several
-// resolutions, with and without max_range, and half of the scans inserted after the map was
-// pruned by a write. The last draw's rays span a box too large for the bitmap of free cells.
-TEST(OccupancyMap, InsertAllMatchesOctomapsInsertPointCloudOverRandomScans) {
+// The builder against OctoMap over the random scans described below.
+void ExpectInsertAllMatchesOctomap() {
   const auto dir = test::ScratchDir();
   const std::string path = (dir / "map.bt").string();
   std::mt19937 rng(11);
@@ -232,6 +229,20 @@ TEST(OccupancyMap, InsertAllMatchesOctomapsInsertPointCloudOverRandomScans) {
       ASSERT_EQ(FileBytes(path), PrunedBinary(reference)) << "draw " << draw << " batch " << batch;
     }
   }
+}
+
+// The builder's own ray casting and lazy updates against OctoMap's insertPointCloud (discretized,
+// lazy), bit for bit in the written file: random rooms seen from random places, at several
+// resolutions, with and without max_range, and half of the scans inserted after the map was
+// pruned by a write. The last draw's rays span a box too large for the bitmap of free cells.
+// Both ray walks: four rays at a time (AVX2, where the processor has it) and one at a time.
+TEST(OccupancyMap, InsertAllMatchesOctomapsInsertPointCloudOverRandomScans) {
+  for (const bool vector_walk : {true, false}) {
+    SCOPED_TRACE(vector_walk ? "vector ray walk" : "scalar ray walk");
+    internal::SetVectorRayWalk(vector_walk);
+    ExpectInsertAllMatchesOctomap();
+  }
+  internal::SetVectorRayWalk(true);
 }
 
 // A cell that misses have driven to the lower clamping bound is skipped by later misses until a

@@ -88,4 +88,11 @@ class OccupancyMapBuilder {
   std::unique_ptr<Impl> impl_;
 };
 
+namespace internal {
+/// Whether the rays are walked four at a time with AVX2 where the processor has it (the
+/// default); false walks them one at a time, as on other processors. Both give the same cells;
+/// the tests compare each with OctoMap.
+void SetVectorRayWalk(bool enabled);
+}  // namespace internal
+
 }  // namespace planeslam::mapping
