@@ -87,11 +87,30 @@ TEST(OccupancyMap, VoxelDownsampleMatchesAReferenceOnRandomClouds) {
       if (i % 97 == 0) pts.push_back(Eigen::Vector3f::Constant(std::nanf("")));
     }
     const double voxel = 0.05 + 0.01 * (draw % 7);
+    // Points on voxel boundaries and one float either side of them, and at the edge of the
+    // voxel index range (2^20 voxels from the origin), where a product rounds unlike the
+    // quotient.
+    std::uniform_int_distribution<int> cell(-200, 200);
+    for (int i = 0; i < 2000; ++i) {
+      Eigen::Vector3f p;
+      for (int a = 0; a < 3; ++a) {
+        const double k = i % 50 == 0 ? std::ldexp(1.0, 20) * (cell(rng) < 0 ? -1 : 1) : cell(rng);
+        p(a) = static_cast<float>(k * voxel);
+        const int side = cell(rng) % 3;
+        if (side != 0) p(a) = std::nextafter(p(a), side > 0 ? 1e30f : -1e30f);
+      }
+      pts.push_back(p);
+    }
     std::map<std::array<std::int64_t, 3>, std::pair<Eigen::Vector3d, int>> reference;
     for (const Eigen::Vector3f& p : pts) {
       if (!p.allFinite()) continue;
       std::array<std::int64_t, 3> key;
-      for (int a = 0; a < 3; ++a) key[a] = static_cast<std::int64_t>(std::floor(p[a] / voxel));
+      bool inside = true;
+      for (int a = 0; a < 3; ++a) {
+        key[a] = static_cast<std::int64_t>(std::floor(p[a] / voxel));
+        inside = inside && key[a] >= -(1 << 20) && key[a] < (1 << 20);
+      }
+      if (!inside) continue;
       auto& [sum, count] = reference.try_emplace(key, Eigen::Vector3d::Zero(), 0).first->second;
       sum += p.cast<double>();
       ++count;
