@@ -570,10 +570,8 @@ class CellBitmap {
   }
   void Set(std::uint64_t key) {
     std::uint64_t bit;
-    if (Bit(key, &bit))
-      words_[bit >> 6] |= std::uint64_t{1} << (bit & 63);
-    else
-      outside_.push_back(key);
+    if (Bit(key, &bit)) words_[bit >> 6] |= std::uint64_t{1} << (bit & 63);
+    else outside_.push_back(key);
   }
 #if defined(__x86_64__)
   /// Set of the keys in `lanes` of `keys` (AVX2): Bit for four keys at once.
@@ -763,10 +761,10 @@ ScanUpdate ComputeScanUpdate(const OccupancyMapConfig& config,
           keys, rays.origin, rays.ends, set,
           [&](const std::uint64_t cells[4], unsigned lanes) { bitmap.SetLanes(cells, lanes); });
     } else {
-      WalkRays(keys, rays.origin, rays.ends, set);
+      WalkRaysScalar(keys, rays.origin, rays.ends, set);
     }
 #else
-    WalkRays(keys, rays.origin, rays.ends, set);
+    WalkRaysScalar(keys, rays.origin, rays.ends, set);
 #endif
     for (std::uint64_t hit : rays.hits) bitmap.Clear(hit);
     update.free_cells = bitmap.Keys();
