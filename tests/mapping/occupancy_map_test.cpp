@@ -264,6 +264,53 @@ TEST(OccupancyMap, InsertAllMatchesOctomapsInsertPointCloudOverRandomScans) {
   internal::SetVectorRayWalk(true);
 }
 
+// Rays from a cell centre to cell centres along the lattice's diagonals step across two or three
+// cell borders at exactly the same distance: which cell comes first is octomap's tie-break, and
+// both walks must take it.
+TEST(OccupancyMap, DiagonalRaysBreakTiesAsOctomapDoes) {
+  const auto dir = test::ScratchDir();
+  const std::string path = (dir / "map.bt").string();
+  OccupancyMapConfig config;
+  config.resolution = 0.1;
+  config.max_range = 0.0;
+  config.downsample_voxel = 0.0;
+  const float centre = 0.05f;  // a cell centre on every axis
+  const Eigen::Vector3f origin = Eigen::Vector3f::Constant(centre);
+  // Ends only on the diagonals (m, m, 0), (m, 0, m), (0, m, m) and (m, m, m) with every sign, so
+  // that the cells beside a diagonal are free or unknown depending on the tie-break.
+  std::vector<Eigen::Vector3f> scan;
+  for (const int m : {3, 7, 12}) {
+    for (int signs = 0; signs < 8; ++signs) {
+      const float sx = signs & 1 ? -1.0f : 1.0f, sy = signs & 2 ? -1.0f : 1.0f,
+                  sz = signs & 4 ? -1.0f : 1.0f, d = 0.1f * m;
+      scan.emplace_back(sx * d, sy * d, 0.0f);
+      scan.emplace_back(sx * d, 0.0f, sz * d);
+      scan.emplace_back(0.0f, sy * d, sz * d);
+      scan.emplace_back(sx * d, sy * d, sz * d);
+    }
+  }
+  octomap::OcTree reference(config.resolution);
+  reference.setProbHit(config.prob_hit);
+  reference.setProbMiss(config.prob_miss);
+  octomap::Pointcloud cloud;
+  for (const Eigen::Vector3f& p : scan) {
+    const Eigen::Vector3f w = p + origin;
+    cloud.push_back(w.x(), w.y(), w.z());
+  }
+  reference.insertPointCloud(cloud, octomap::point3d(centre, centre, centre), -1.0, true, true);
+  Pose T = Pose::Identity();
+  T.translation() = origin.cast<double>();
+  for (const bool vector_walk : {true, false}) {
+    SCOPED_TRACE(vector_walk ? "vector ray walk" : "scalar ray walk");
+    internal::SetVectorRayWalk(vector_walk);
+    OccupancyMapBuilder builder(config);
+    builder.Insert(scan, T);
+    builder.Write(path);
+    EXPECT_EQ(FileBytes(path), PrunedBinary(reference));
+  }
+  internal::SetVectorRayWalk(true);
+}
+
 // A cell that misses have driven to the lower clamping bound is skipped by later misses until a
 // hit raises it: the hit and the misses after it must count as in OctoMap.
 TEST(OccupancyMap, ClampedFreeCellsFollowLaterHitsAsOctomapDoes) {
