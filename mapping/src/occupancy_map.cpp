@@ -434,10 +434,13 @@ class RayLanes {
   }
   unsigned active() const { return active_; }
 
-  /// One step of every lane (RayWalk::Advance): the cells stepped into in `cells`; returns the
-  /// lanes whose walk goes on (their cell is to be visited) and sets *ended to the active lanes
-  /// whose walk has ended.
-  __attribute__((target("avx2"))) unsigned Advance(std::uint64_t cells[4], unsigned* ended) {
+  /// The lanes' current cells (packed keys), aligned for a vector load.
+  const std::uint64_t* cells() const { return cell_; }
+
+  /// One step of every lane (RayWalk::Advance) into the cells(); returns the lanes whose walk
+  /// goes on (their cell is to be visited) and sets *ended to the active lanes whose walk has
+  /// ended.
+  __attribute__((target("avx2"))) unsigned Advance(unsigned* ended) {
     const __m256i mx = LoadLanes(axis_[0]), my = LoadLanes(axis_[1]), mz = LoadLanes(axis_[2]);
     __m256i cell =
         _mm256_add_epi64(LoadLanes(cell_),
@@ -468,7 +471,6 @@ class RayLanes {
     _mm256_store_pd(t_[1], ty);
     _mm256_store_pd(t_[2], tz);
     _mm256_store_si256(reinterpret_cast<__m256i*>(cell_), cell);
-    _mm256_storeu_si256(reinterpret_cast<__m256i*>(cells), cell);
     const unsigned stop = static_cast<unsigned>(_mm256_movemask_pd(_mm256_castsi256_pd(at_end))) |
                           static_cast<unsigned>(_mm256_movemask_pd(past));
     *ended = stop & active_;
@@ -511,14 +513,14 @@ __attribute__((target("avx2"))) void WalkRaysAvx2(const octomap::OcTree& keys,
   for (RayLanes& lanes : groups) {
     for (int lane = 0; lane < 4; ++lane) start(lanes, lane);
   }
-  alignas(32) std::uint64_t cells[4];
   for (;;) {
     unsigned any = 0;
     for (RayLanes& lanes : groups) {
       if (lanes.active() == 0) continue;
       any = 1;
       unsigned ended = 0;
-      visit_lanes(cells, lanes.Advance(cells, &ended));
+      const unsigned go = lanes.Advance(&ended);
+      visit_lanes(lanes.cells(), go);
       for (; ended != 0; ended &= ended - 1) start(lanes, __builtin_ctz(ended));
     }
     if (!any) return;
@@ -526,18 +528,15 @@ __attribute__((target("avx2"))) void WalkRaysAvx2(const octomap::OcTree& keys,
 }
 #endif
 
-/// Calls visit(packed key) for every cell computeRayKeys(origin, end) returns, for every end in
-/// `ends` (each cell as often as it lies on a ray, in no particular order).
-template <typename Visit>
+/// Visits every cell computeRayKeys(origin, end) returns, for every end in `ends` (each cell as
+/// often as it lies on a ray, in no particular order): with AVX2 a ray's first cell through
+/// visit(packed key) and the cells stepped into four at a time through visit_lanes(keys[4],
+/// lanes to visit); without it every cell through visit.
+template <typename Visit, typename VisitLanes>
 void WalkRays(const octomap::OcTree& keys, const octomap::point3d& origin,
-              const std::vector<octomap::point3d>& ends, Visit&& visit) {
+              const std::vector<octomap::point3d>& ends, Visit&& visit, VisitLanes&& visit_lanes) {
 #if defined(__x86_64__)
-  if (HasAvx2()) {
-    return WalkRaysAvx2(keys, origin, ends, visit,
-                        [&](const std::uint64_t cells[4], unsigned lanes) {
-                          for (; lanes != 0; lanes &= lanes - 1) visit(cells[__builtin_ctz(lanes)]);
-                        });
-  }
+  if (HasAvx2()) return WalkRaysAvx2(keys, origin, ends, visit, visit_lanes);
 #endif
   WalkRaysScalar(keys, origin, ends, visit);
 }
@@ -573,7 +572,12 @@ class CellBitmap {
     if (Bit(key, &bit)) words_[bit >> 6] |= std::uint64_t{1} << (bit & 63);
     else outside_.push_back(key);
   }
-#if defined(__x86_64__)
+#if !defined(__x86_64__)
+  /// Set of the keys in `lanes` of `keys` (WalkRays visits one cell at a time without AVX2).
+  void SetLanes(const std::uint64_t keys[4], unsigned lanes) {
+    for (; lanes != 0; lanes &= lanes - 1) Set(keys[__builtin_ctz(lanes)]);
+  }
+#else
   /// Set of the keys in `lanes` of `keys` (AVX2): Bit for four keys at once.
   __attribute__((target("avx2"))) void SetLanes(const std::uint64_t keys[4], unsigned lanes) {
     const __m256i key = LoadLanes(keys);
@@ -725,7 +729,11 @@ ScanRays CollectRays(const octomap::OcTree& keys, const OccupancyMapConfig& conf
 /// Free cells of the rays through a hash set, for scans whose box is too large for a bitmap.
 std::vector<std::uint64_t> FreeCellsBySet(const octomap::OcTree& keys, const ScanRays& rays) {
   PackedKeySet free_cells;
-  WalkRays(keys, rays.origin, rays.ends, [&](std::uint64_t cell) { free_cells.Insert(cell); });
+  const auto insert = [&](std::uint64_t cell) { free_cells.Insert(cell); };
+  WalkRays(keys, rays.origin, rays.ends, insert,
+           [&](const std::uint64_t cells[4], unsigned lanes) {
+             for (; lanes != 0; lanes &= lanes - 1) insert(cells[__builtin_ctz(lanes)]);
+           });
   std::vector<std::uint64_t> cells = free_cells.TakeSorted();
   std::vector<std::uint64_t> kept;
   kept.reserve(cells.size());
@@ -754,18 +762,9 @@ ScanUpdate ComputeScanUpdate(const OccupancyMapConfig& config,
   // Kept per thread: clearing memory already mapped is cheaper than mapping it afresh.
   thread_local CellBitmap bitmap;
   if (bitmap.Reset(rays.lo, rays.hi)) {
-    const auto set = [&](std::uint64_t cell) { bitmap.Set(cell); };
-#if defined(__x86_64__)
-    if (HasAvx2()) {
-      WalkRaysAvx2(
-          keys, rays.origin, rays.ends, set,
-          [&](const std::uint64_t cells[4], unsigned lanes) { bitmap.SetLanes(cells, lanes); });
-    } else {
-      WalkRaysScalar(keys, rays.origin, rays.ends, set);
-    }
-#else
-    WalkRaysScalar(keys, rays.origin, rays.ends, set);
-#endif
+    WalkRays(
+        keys, rays.origin, rays.ends, [&](std::uint64_t cell) { bitmap.Set(cell); },
+        [&](const std::uint64_t cells[4], unsigned lanes) { bitmap.SetLanes(cells, lanes); });
     for (std::uint64_t hit : rays.hits) bitmap.Clear(hit);
     update.free_cells = bitmap.Keys();
   } else {

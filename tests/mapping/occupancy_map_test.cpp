@@ -205,6 +205,26 @@ std::string FileBytes(const std::string& path) {
   return std::string(std::istreambuf_iterator<char>(in), {});
 }
 
+// OctoMap's tree with the builder's hit and miss probabilities.
+octomap::OcTree ReferenceTree(const OccupancyMapConfig& config) {
+  octomap::OcTree tree(config.resolution);
+  tree.setProbHit(config.prob_hit);
+  tree.setProbMiss(config.prob_miss);
+  return tree;
+}
+
+// Runs `check` with the rays walked four at a time (AVX2, where the processor has it), then one
+// at a time, and leaves the default on.
+template <typename Check>
+void WithEachRayWalk(Check&& check) {
+  for (const bool vector_walk : {true, false}) {
+    SCOPED_TRACE(vector_walk ? "vector ray walk" : "scalar ray walk");
+    internal::SetVectorRayWalk(vector_walk);
+    check();
+  }
+  internal::SetVectorRayWalk(true);
+}
+
 // The builder against OctoMap over the random scans described below.
 void ExpectInsertAllMatchesOctomap() {
   const auto dir = test::ScratchDir();
@@ -220,9 +240,7 @@ void ExpectInsertAllMatchesOctomap() {
     config.downsample_voxel = 0.0;  // octomap's insertPointCloud does not thin
     const float half = huge ? 6.0f : 1.5f + 1.5f * (u(rng) + 1.0f);
     OccupancyMapBuilder builder(config);
-    octomap::OcTree reference(config.resolution);
-    reference.setProbHit(config.prob_hit);
-    reference.setProbMiss(config.prob_miss);
+    octomap::OcTree reference = ReferenceTree(config);
     for (int batch = 0; batch < 2; ++batch) {
       std::vector<std::vector<Eigen::Vector3f>> scans;
       std::vector<Pose> poses;
@@ -256,12 +274,7 @@ void ExpectInsertAllMatchesOctomap() {
 // pruned by a write. The last draw's rays span a box too large for the bitmap of free cells.
 // Both ray walks: four rays at a time (AVX2, where the processor has it) and one at a time.
 TEST(OccupancyMap, InsertAllMatchesOctomapsInsertPointCloudOverRandomScans) {
-  for (const bool vector_walk : {true, false}) {
-    SCOPED_TRACE(vector_walk ? "vector ray walk" : "scalar ray walk");
-    internal::SetVectorRayWalk(vector_walk);
-    ExpectInsertAllMatchesOctomap();
-  }
-  internal::SetVectorRayWalk(true);
+  WithEachRayWalk(ExpectInsertAllMatchesOctomap);
 }
 
 // Rays from a cell centre to cell centres along the lattice's diagonals step across two or three
@@ -289,9 +302,7 @@ TEST(OccupancyMap, DiagonalRaysBreakTiesAsOctomapDoes) {
       scan.emplace_back(sx * d, sy * d, sz * d);
     }
   }
-  octomap::OcTree reference(config.resolution);
-  reference.setProbHit(config.prob_hit);
-  reference.setProbMiss(config.prob_miss);
+  octomap::OcTree reference = ReferenceTree(config);
   octomap::Pointcloud cloud;
   for (const Eigen::Vector3f& p : scan) {
     const Eigen::Vector3f w = p + origin;
@@ -300,15 +311,12 @@ TEST(OccupancyMap, DiagonalRaysBreakTiesAsOctomapDoes) {
   reference.insertPointCloud(cloud, octomap::point3d(centre, centre, centre), -1.0, true, true);
   Pose T = Pose::Identity();
   T.translation() = origin.cast<double>();
-  for (const bool vector_walk : {true, false}) {
-    SCOPED_TRACE(vector_walk ? "vector ray walk" : "scalar ray walk");
-    internal::SetVectorRayWalk(vector_walk);
+  WithEachRayWalk([&] {
     OccupancyMapBuilder builder(config);
     builder.Insert(scan, T);
     builder.Write(path);
     EXPECT_EQ(FileBytes(path), PrunedBinary(reference));
-  }
-  internal::SetVectorRayWalk(true);
+  });
 }
 
 // A cell that misses have driven to the lower clamping bound is skipped by later misses until a
@@ -320,9 +328,7 @@ TEST(OccupancyMap, ClampedFreeCellsFollowLaterHitsAsOctomapDoes) {
   config.max_range = 0.0;
   config.downsample_voxel = 0.0;
   OccupancyMapBuilder builder(config);
-  octomap::OcTree reference(config.resolution);
-  reference.setProbHit(config.prob_hit);
-  reference.setProbMiss(config.prob_miss);
+  octomap::OcTree reference = ReferenceTree(config);
   std::vector<Eigen::Vector3f> wall = Wall(2.0f);
   wall.pop_back();  // the NaN: octomap's insertPointCloud takes finite points
   const std::vector<Eigen::Vector3f> in_front = {Eigen::Vector3f(0.1f, 0.1f, 1.0f)};
