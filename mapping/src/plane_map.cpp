@@ -210,7 +210,8 @@ std::vector<std::string> PlaneMapConfig::Validate() const {
 // ---------------------------------------------------------------------------------------------
 // PlaneMap
 
-PlaneMap::PlaneMap(const PlaneMapConfig& config) : config_(config) {
+PlaneMap::PlaneMap(const PlaneMapConfig& config)
+    : config_(config), cos_merge_(std::cos(config.merge_max_normal_angle_deg * kDegToRad)) {
   const auto problems = config_.Validate();
   PLANESLAM_CHECK(problems.empty(), "invalid PlaneMapConfig: " << problems.front());
 }
@@ -311,7 +312,9 @@ PlaneMap::Extent& PlaneMap::ExtentAt(std::size_t i) {
   if (extent.stale) {
     extent.basis = MakePlaneBasis(planes_[i].normal, planes_[i].d);
     extent.cell = config_.sample_cell_size;
-    AddToExtent(extent, WorldSamples(planes_[i]));
+    const std::vector<Eigen::Vector3d> samples = WorldSamples(planes_[i]);
+    extent.fine.reserve(samples.size());  // most samples have a cell of their own
+    AddToExtent(extent, samples);
     extent.stale = false;
   }
   return extent;
@@ -357,7 +360,7 @@ int PlaneMap::CountTouching(const Extent& extent, const std::vector<Eigen::Vecto
 }
 
 bool PlaneMap::Coincide(const MapPlane& a, const MapPlane& b, double across_gaps_offset) {
-  if (a.normal.dot(b.normal) < std::cos(config_.merge_max_normal_angle_deg * kDegToRad)) {
+  if (a.normal.dot(b.normal) < cos_merge_) {
     return false;
   }
   const double offset =
@@ -451,7 +454,6 @@ FrameAssociation PlaneMap::AddObservations(
   }
   const Pose& T = keyframe_poses_.at(keyframe_id);
   const double cos_assoc = std::cos(config_.max_normal_angle_deg * kDegToRad);
-  const double cos_merge = std::cos(config_.merge_max_normal_angle_deg * kDegToRad);
   const double cos_rebuild = std::cos(kExtentRebuildAngleDeg * kDegToRad);
 
   FrameAssociation result;
@@ -540,7 +542,7 @@ FrameAssociation PlaneMap::AddObservations(
       const int other = candidates[c].second;
       const MapPlane& a = planes_[IndexOf(survivor)];
       const MapPlane& b = planes_[IndexOf(other)];
-      if (a.normal.dot(b.normal) < cos_merge) continue;
+      if (a.normal.dot(b.normal) < cos_merge_) continue;
       if (std::abs(a.normal.dot(b.centroid) - a.d) > config_.merge_max_offset ||
           std::abs(b.normal.dot(a.centroid) - b.d) > config_.merge_max_offset) {
         continue;

@@ -237,6 +237,7 @@ class PlaneMap {
   std::size_t IndexOf(int id) const;
 
   PlaneMapConfig config_;
+  double cos_merge_;  ///< cos(config_.merge_max_normal_angle_deg): Coincide runs for many pairs
   std::vector<MapPlane> planes_;
   std::vector<Extent> extents_;  ///< parallel to planes_
   std::unordered_map<std::int64_t, Pose> keyframe_poses_;

@@ -48,6 +48,12 @@ OrganizedCloud ProjectToRangeImage(const std::vector<LidarPoint>& scan, const Se
 /// Returns the number of rings; `rings` gets one index per point.
 int RecoverRings(const std::vector<LidarPoint>& scan, std::vector<int>* rings);
 
+namespace internal {
+/// atan2(y, x) of every point, approximately (within 1e-6 rad of std::atan2; exposed for its
+/// test): the projection's first guess at each azimuth.
+void ApproximateAzimuths(const std::vector<LidarPoint>& scan, std::vector<float>* azimuths);
+}  // namespace internal
+
 /// Reads a .bin and projects it with the config (and its range limits).
 OrganizedCloud ReadKittiRangeImage(const std::string& path, const SensorConfig& config,
                                    RangeProjectionStats* stats = nullptr);
