@@ -54,15 +54,14 @@ std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>&
   // Voxel indices within +-2^20 per axis, e.g. +-52 km at 5 cm; points beyond are dropped (no
   // range image reaches that far).
   constexpr double kHalf = 1 << 20;
-  // Each voxel's points are summed in input order, and the centroids come out in (x, y, z) voxel
-  // order, so the result does not depend on how the voxels are found. Neighbouring points of a
-  // range image mostly share a voxel: the last one found is tried first.
-  registration::VoxelIndex index;
   std::vector<Eigen::Vector3i> keys;
-  std::vector<Eigen::Vector3d> sums;
-  std::vector<int> counts;
-  int last = -1;
-  for (const Eigen::Vector3f& p : points) {
+  std::vector<std::uint32_t> source;  // index of each key's point
+  keys.reserve(points.size());
+  source.reserve(points.size());
+  Eigen::Vector3i lo = Eigen::Vector3i::Constant(std::numeric_limits<int>::max());
+  Eigen::Vector3i hi = Eigen::Vector3i::Constant(std::numeric_limits<int>::min());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const Eigen::Vector3f& p = points[i];
     if (!p.allFinite()) continue;
     Eigen::Vector3i key;
     bool inside = true;
@@ -73,32 +72,48 @@ std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>&
       key[a] = inside ? registration::FloorToInt(q) : 0;
     }
     if (!inside) continue;
-    if (last < 0 || keys[last] != key) {
-      bool inserted = false;
-      last = index.Insert(key, &inserted);
-      if (inserted) {
-        keys.push_back(key);
-        sums.push_back(Eigen::Vector3d::Zero());
-        counts.push_back(0);
-      }
-    }
-    sums[last] += p.cast<double>();
-    ++counts[last];
+    keys.push_back(key);
+    source.push_back(static_cast<std::uint32_t>(i));
+    lo = lo.cwiseMin(key);
+    hi = hi.cwiseMax(key);
   }
-  // (x, y, z) order is the order of the keys packed into 21 bits each, offset to be non-negative:
-  // the sort compares one integer, not three through an index.
-  std::vector<std::pair<std::uint64_t, int>> order(keys.size());
-  for (std::size_t k = 0; k < order.size(); ++k) {
-    std::uint64_t packed = 0;
-    for (int a = 0; a < 3; ++a) {
-      packed = packed << 21 | static_cast<std::uint64_t>(keys[k][a] + (1 << 20));
-    }
-    order[k] = {packed, static_cast<int>(k)};
+  if (keys.empty()) return {};
+  // Keys packed in (x, y, z) order with as many bits per axis as the cloud's extent needs, then
+  // sorted stably (least significant digit first): each voxel's points stay in input order, so
+  // its sum is the same whatever the sort, and the centroids come out in (x, y, z) voxel order.
+  int bits[3];
+  for (int a = 0; a < 3; ++a) {
+    bits[a] = 1;
+    while ((std::uint64_t{1} << bits[a]) <= static_cast<std::uint64_t>(hi[a] - lo[a])) ++bits[a];
   }
-  std::sort(order.begin(), order.end());
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> sorted(keys.size()), buffer(keys.size());
+  for (std::size_t k = 0; k < keys.size(); ++k) {
+    const Eigen::Vector3i r = keys[k] - lo;
+    sorted[k] = {static_cast<std::uint64_t>(r.x()) << (bits[1] + bits[2]) |
+                     static_cast<std::uint64_t>(r.y()) << bits[2] | static_cast<std::uint64_t>(r.z()),
+                 source[k]};
+  }
+  constexpr int kDigitBits = 11;
+  std::vector<std::uint32_t> start(std::size_t{1} << kDigitBits);
+  for (int shift = 0; shift < bits[0] + bits[1] + bits[2]; shift += kDigitBits) {
+    std::fill(start.begin(), start.end(), 0);
+    const auto digit = [&](std::uint64_t key) { return key >> shift & ((1u << kDigitBits) - 1); };
+    for (const auto& item : sorted) ++start[digit(item.first)];
+    std::uint32_t sum = 0;
+    for (std::uint32_t& s : start) sum += std::exchange(s, sum);
+    for (const auto& item : sorted) buffer[start[digit(item.first)]++] = item;
+    sorted.swap(buffer);
+  }
   std::vector<Eigen::Vector3f> out;
-  out.reserve(order.size());
-  for (const auto& [packed, k] : order) out.push_back((sums[k] / counts[k]).cast<float>());
+  for (std::size_t k = 0; k < sorted.size();) {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    std::size_t end = k;
+    for (; end < sorted.size() && sorted[end].first == sorted[k].first; ++end) {
+      sum += points[sorted[end].second].cast<double>();
+    }
+    out.push_back((sum / static_cast<double>(end - k)).cast<float>());
+    k = end;
+  }
   return out;
 }
 

@@ -25,8 +25,12 @@ std::int64_t CellKey(std::int64_t i, std::int64_t j) {
                                    static_cast<std::uint64_t>(static_cast<std::uint32_t>(j)));
 }
 
+/// floor(x / cell), without a libm call (the build targets x86-64 without SSE4.1's rounding
+/// instruction): the value of static_cast<std::int64_t>(std::floor(x / cell)) wherever defined.
 std::int64_t FloorIndex(double x, double cell) {
-  return static_cast<std::int64_t>(std::floor(x / cell));
+  const double q = x / cell;
+  const auto truncated = static_cast<std::int64_t>(q);
+  return truncated - (static_cast<double>(truncated) > q ? 1 : 0);
 }
 
 std::int64_t CellI(std::int64_t key) { return key >> 32; }
@@ -572,6 +576,9 @@ FrameAssociation PlaneMap::AddFrame(std::int64_t keyframe_id, const Pose& T_worl
   for (std::size_t i = 0; i < segmentation.planes.size(); ++i) {
     index_of_id[segmentation.planes[i].id] = i;
   }
+  // Neighbouring pixels mostly share a label: the last one's plane is tried first.
+  int last_label = 0;
+  std::vector<Eigen::Vector3f>* last_points = nullptr;
   std::vector<std::vector<Eigen::Vector3f>> points(segmentation.planes.size());
   const int stride =
       cloud.model == datasets::SensorModel::kPinhole ? config_.sample_pixel_stride : 1;
@@ -580,8 +587,12 @@ FrameAssociation PlaneMap::AddFrame(std::int64_t keyframe_id, const Pose& T_worl
       const std::size_t p = static_cast<std::size_t>(row) * cloud.width + col;
       const int label = segmentation.labels[p];
       if (label < 1 || !cloud.IsValid(p)) continue;
-      const auto it = index_of_id.find(label);
-      if (it != index_of_id.end()) points[it->second].push_back(cloud.points[p]);
+      if (label != last_label) {
+        const auto it = index_of_id.find(label);
+        last_label = label;
+        last_points = it != index_of_id.end() ? &points[it->second] : nullptr;
+      }
+      if (last_points) last_points->push_back(cloud.points[p]);
     }
   }
   return AddObservations(keyframe_id, T_world_sensor, segmentation.planes, points);

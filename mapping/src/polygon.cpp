@@ -16,11 +16,6 @@ namespace planeslam::mapping {
 // ---------------------------------------------------------------------------------------------
 // Plane basis
 
-Eigen::Vector2d PlaneBasis::Project(const Eigen::Vector3d& p) const {
-  const Eigen::Vector3d r = p - origin;
-  return {u.dot(r), v.dot(r)};
-}
-
 Eigen::Vector3d PlaneBasis::Unproject(const Eigen::Vector2d& xy) const {
   return origin + u * xy.x() + v * xy.y();
 }

@@ -38,8 +38,12 @@ struct PlaneBasis {
   Eigen::Vector3d u = Eigen::Vector3d::UnitX();       ///< first in-plane axis
   Eigen::Vector3d v = Eigen::Vector3d::UnitY();       ///< second in-plane axis
 
-  /// Plane coordinates of the orthogonal projection of p [m].
-  Eigen::Vector2d Project(const Eigen::Vector3d& p) const;
+  /// Plane coordinates of the orthogonal projection of p [m] (inline: the map projects every
+  /// sample of a plane whenever its extent is rebuilt).
+  Eigen::Vector2d Project(const Eigen::Vector3d& p) const {
+    const Eigen::Vector3d r = p - origin;
+    return {u.dot(r), v.dot(r)};
+  }
   /// The 3D point on the plane with plane coordinates xy [m].
   Eigen::Vector3d Unproject(const Eigen::Vector2d& xy) const;
 };
