@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <unordered_map>
 #include <utility>
 
@@ -60,9 +61,17 @@ bool OnSegment(const Eigen::Vector2d& a, const Eigen::Vector2d& b, const Eigen::
 
 int Sign(double v) { return (v > 0) - (v < 0); }
 
-/// Closed segments ab and cd share at least one point.
+/// Closed segments ab and cd share at least one point. Segments with disjoint bounding boxes
+/// never do (whatever the rounding of the orientations), which lets IsSimplePolygon test only
+/// the pairs whose boxes overlap.
 bool SegmentsIntersect(const Eigen::Vector2d& a, const Eigen::Vector2d& b, const Eigen::Vector2d& c,
                        const Eigen::Vector2d& d) {
+  if (std::max(a.x(), b.x()) < std::min(c.x(), d.x()) ||
+      std::max(c.x(), d.x()) < std::min(a.x(), b.x()) ||
+      std::max(a.y(), b.y()) < std::min(c.y(), d.y()) ||
+      std::max(c.y(), d.y()) < std::min(a.y(), b.y())) {
+    return false;
+  }
   const int o1 = Sign(Orient(a, b, c));
   const int o2 = Sign(Orient(a, b, d));
   const int o3 = Sign(Orient(c, d, a));
@@ -102,9 +111,32 @@ bool IsSimplePolygon(const std::vector<Eigen::Vector2d>& polygon) {
     // Adjacent edge (b, c): only a fold-back (c on the line through a, b, behind b) is illegal.
     const Eigen::Vector2d& c = polygon[(i + 2) % n];
     if (Orient(a, b, c) == 0.0 && (a - b).dot(c - b) > 0.0) return false;
-    for (std::size_t j = i + 2; j < n; ++j) {
-      if (i == 0 && j == n - 1) continue;  // edges n-1 and 0 are adjacent
-      if (SegmentsIntersect(a, b, polygon[j], polygon[(j + 1) % n])) return false;
+  }
+  // Non-adjacent edges must not meet. Only edges whose x ranges overlap can: a sweep over the
+  // edges by their left ends pairs each with those starting before it ends.
+  struct Edge {
+    double x0, x1, y0, y1;
+    std::size_t i;  ///< from vertex i to vertex i + 1
+  };
+  std::vector<Edge> edges(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector2d& a = polygon[i];
+    const Eigen::Vector2d& b = polygon[(i + 1) % n];
+    edges[i] = {std::min(a.x(), b.x()), std::max(a.x(), b.x()), std::min(a.y(), b.y()),
+                std::max(a.y(), b.y()), i};
+  }
+  std::sort(edges.begin(), edges.end(),
+            [](const Edge& e, const Edge& f) { return e.x0 < f.x0 || (e.x0 == f.x0 && e.i < f.i); });
+  for (std::size_t k = 0; k < n; ++k) {
+    const Edge& e = edges[k];
+    for (std::size_t m = k + 1; m < n && edges[m].x0 <= e.x1; ++m) {
+      const Edge& f = edges[m];
+      const std::size_t i = std::min(e.i, f.i), j = std::max(e.i, f.i);
+      if (j - i < 2 || (i == 0 && j == n - 1)) continue;  // adjacent edges
+      if (f.y0 > e.y1 || e.y0 > f.y1) continue;
+      if (SegmentsIntersect(polygon[i], polygon[(i + 1) % n], polygon[j], polygon[(j + 1) % n])) {
+        return false;
+      }
     }
   }
   return true;
@@ -413,17 +445,75 @@ std::vector<std::vector<Eigen::Vector2d>> Contours(const std::vector<std::uint8_
 
 }  // namespace
 
+namespace {
+
+/// Whether the ray from p towards +x crosses edge (a, b). Half-open in y: a ray through a vertex
+/// counts the edges on one side of it only.
+bool RayCrosses(const Eigen::Vector2d& p, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+  return (a.y() > p.y()) != (b.y() > p.y()) &&
+         p.x() < a.x() + (p.y() - a.y()) * (b.x() - a.x()) / (b.y() - a.y());
+}
+
+/// PointInPolygon for many points against one large polygon: its edges are listed per row of a
+/// division of its y range, each in the rows its y interval spans, and a point tests only the
+/// edges of its row. An edge outside the row cannot span the point's y, so it could not cross.
+class PolygonRows {
+ public:
+  explicit PolygonRows(const std::vector<Eigen::Vector2d>& polygon) : polygon_(polygon) {
+    const std::size_t n = polygon.size();
+    y0_ = y1_ = polygon.front().y();
+    for (const auto& v : polygon) y0_ = std::min(y0_, v.y()), y1_ = std::max(y1_, v.y());
+    rows_ = std::max<int>(1, static_cast<int>(n / 8));
+    height_ = (y1_ - y0_) / rows_;
+    if (!(height_ > 0.0)) rows_ = 1, height_ = 1.0;
+    std::vector<std::pair<int, int>> spans(n);  // rows of edge (i, i - 1)
+    first_.assign(static_cast<std::size_t>(rows_) + 1, 0);
+    for (std::size_t i = 0, j = n - 1; i < n; j = i++) {
+      spans[i] = {Row(std::min(polygon[i].y(), polygon[j].y())),
+                  Row(std::max(polygon[i].y(), polygon[j].y()))};
+      for (int r = spans[i].first; r <= spans[i].second; ++r) ++first_[r + 1];
+    }
+    for (int r = 0; r < rows_; ++r) first_[r + 1] += first_[r];
+    edges_.resize(first_.back());
+    std::vector<std::size_t> fill(first_.begin(), first_.end() - 1);
+    for (std::size_t i = 0; i < n; ++i) {
+      for (int r = spans[i].first; r <= spans[i].second; ++r) edges_[fill[r]++] = i;
+    }
+  }
+
+  /// PointInPolygon(p, polygon).
+  bool Contains(const Eigen::Vector2d& p) const {
+    if (!(p.y() >= y0_ && p.y() < y1_)) return false;  // no edge spans p.y
+    const std::size_t n = polygon_.size();
+    bool inside = false;
+    const int r = Row(p.y());
+    for (std::size_t k = first_[r]; k < first_[r + 1]; ++k) {
+      const std::size_t i = edges_[k];
+      if (RayCrosses(p, polygon_[i], polygon_[i == 0 ? n - 1 : i - 1])) inside = !inside;
+    }
+    return inside;
+  }
+
+ private:
+  /// Monotonic in y, so an edge's rows run from its lower end's row to its upper end's.
+  int Row(double y) const {
+    return std::min(rows_ - 1, static_cast<int>(std::max(0.0, (y - y0_) / height_)));
+  }
+
+  const std::vector<Eigen::Vector2d>& polygon_;
+  double y0_, y1_, height_;
+  int rows_;
+  std::vector<std::size_t> first_;  ///< edges_[first_[r], first_[r + 1]) span row r
+  std::vector<std::size_t> edges_;  ///< edge i joins vertices i and i - 1
+};
+
+}  // namespace
+
 bool PointInPolygon(const Eigen::Vector2d& p, const std::vector<Eigen::Vector2d>& polygon) {
   bool inside = false;
   const std::size_t n = polygon.size();
   for (std::size_t i = 0, j = n - 1; i < n; j = i++) {
-    const Eigen::Vector2d& a = polygon[i];
-    const Eigen::Vector2d& b = polygon[j];
-    // Half-open in y: a ray through a vertex counts the edges on one side of it only.
-    if ((a.y() > p.y()) != (b.y() > p.y()) &&
-        p.x() < a.x() + (p.y() - a.y()) * (b.x() - a.x()) / (b.y() - a.y())) {
-      inside = !inside;
-    }
+    if (RayCrosses(p, polygon[i], polygon[j])) inside = !inside;
   }
   return inside;
 }
@@ -489,13 +579,20 @@ RegionOutline ConcaveHull(const std::vector<Eigen::Vector2d>& points, const Poly
     ring_area[i] = std::abs(SignedArea(rings[i]));
     for (const Eigen::Vector2d& v : rings[i]) ring_box[i].extend(v);
   }
+  // A large ring (a plane's outer boundary) is tested against each of its holes: its edges are
+  // indexed by row the first time.
+  std::vector<std::unique_ptr<PolygonRows>> ring_rows(rings.size());
+  const auto inside_ring = [&](const Eigen::Vector2d& p, std::size_t j) {
+    if (rings[j].size() < 64) return PointInPolygon(p, rings[j]);
+    if (!ring_rows[j]) ring_rows[j] = std::make_unique<PolygonRows>(rings[j]);
+    return ring_rows[j]->Contains(p);
+  };
   for (std::size_t i = 0; i < rings.size(); ++i) {
     if (rings[i].size() < 3) continue;
     bool nested = false;
     for (std::size_t j = 0; j < rings.size() && !nested; ++j) {
       nested = ring_area[j] > ring_area[i] && rings[j].size() >= 3 &&
-               ring_box[j].contains(rings[i].front()) &&
-               PointInPolygon(rings[i].front(), rings[j]);
+               ring_box[j].contains(rings[i].front()) && inside_ring(rings[i].front(), j);
     }
     if (nested) continue;
     Polygon2 part = SimplifiedPart(rings[i], tolerance);

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <random>
@@ -112,6 +113,74 @@ TEST(ConcaveHull, SeparateRegionsArePartsAndHolesAreFilled) {
       4.0, 4.0, 40000, 14));
   ASSERT_EQ(framed.parts.size(), 1u);
   CheckPart(framed.parts[0], 16.0, "frame with a hole and an island");
+}
+
+TEST(ConcaveHull, ManyHolesWithIslandsInALargeRegion) {
+  // A disk of radius 5 with a 3 x 3 array of unseen 1.2 x 1.2 holes, each holding a 0.4 x 0.4
+  // island: the outer ring (a staircase round the disk) has hundreds of vertices, and every hole
+  // and island is tested against it.
+  const auto inside = [](const Eigen::Vector2d& p) {
+    if ((p - Eigen::Vector2d(5.0, 5.0)).norm() > 5.0) return false;
+    const Eigen::Vector2d q = p - Eigen::Vector2d(2.0, 2.0);
+    if (q.minCoeff() < 0.0 || q.maxCoeff() >= 6.0) return true;
+    const Eigen::Vector2d c = q - 2.0 * (q / 2.0).array().floor().matrix() - Eigen::Vector2d(1, 1);
+    const double r = c.cwiseAbs().maxCoeff();
+    return r > 0.6 || r < 0.2;
+  };
+  const RegionOutline outline = ConcaveHull(SampleRegion(inside, 10.0, 10.0, 200000, 15));
+  ASSERT_EQ(outline.parts.size(), 1u);  // holes filled, islands covered
+  EXPECT_NEAR(outline.parts[0].area, 25.0 * M_PI, 0.05 * 25.0 * M_PI);
+}
+
+TEST(Polygon, SimplicityMatchesEveryPairOnLatticePolygons) {
+  // Random polygons with vertices on a 6 x 6 integer lattice (many collinear, touching and
+  // overlapping edges, all exact in double) against a test of every pair of edges in integers.
+  const auto orient = [](const Eigen::Vector2i& a, const Eigen::Vector2i& b,
+                         const Eigen::Vector2i& c) {
+    const long v = static_cast<long>(b.x() - a.x()) * (c.y() - a.y()) -
+                   static_cast<long>(b.y() - a.y()) * (c.x() - a.x());
+    return (v > 0) - (v < 0);
+  };
+  const auto on = [](const Eigen::Vector2i& a, const Eigen::Vector2i& b, const Eigen::Vector2i& c) {
+    return std::min(a.x(), b.x()) <= c.x() && c.x() <= std::max(a.x(), b.x()) &&
+           std::min(a.y(), b.y()) <= c.y() && c.y() <= std::max(a.y(), b.y());
+  };
+  const auto meet = [&](const Eigen::Vector2i& a, const Eigen::Vector2i& b,
+                        const Eigen::Vector2i& c, const Eigen::Vector2i& d) {
+    const int o1 = orient(a, b, c), o2 = orient(a, b, d), o3 = orient(c, d, a),
+              o4 = orient(c, d, b);
+    if (o1 * o2 < 0 && o3 * o4 < 0) return true;
+    return (o1 == 0 && on(a, b, c)) || (o2 == 0 && on(a, b, d)) || (o3 == 0 && on(c, d, a)) ||
+           (o4 == 0 && on(c, d, b));
+  };
+  std::mt19937 rng(21);
+  std::uniform_int_distribution<int> coordinate(0, 5), size(3, 40);
+  int simple = 0;
+  for (int draw = 0; draw < 3000; ++draw) {
+    std::vector<Eigen::Vector2i> v(static_cast<std::size_t>(size(rng)));
+    for (auto& p : v) p = {coordinate(rng), coordinate(rng)};
+    if (draw % 3 == 0) {  // star-shaped around the centre: often simple
+      std::sort(v.begin(), v.end(), [](const Eigen::Vector2i& a, const Eigen::Vector2i& b) {
+        return std::atan2(2 * a.y() - 5, 2 * a.x() - 5) < std::atan2(2 * b.y() - 5, 2 * b.x() - 5);
+      });
+    }
+    const std::size_t n = v.size();
+    Points polygon;
+    for (const auto& p : v) polygon.emplace_back(p.x(), p.y());
+    bool expected = SignedArea(polygon) != 0.0;
+    for (std::size_t i = 0; i < n && expected; ++i) {
+      const auto &a = v[i], &b = v[(i + 1) % n], &c = v[(i + 2) % n];
+      if (a == b) expected = false;
+      if (orient(a, b, c) == 0 && (a - b).dot(c - b) > 0) expected = false;
+      for (std::size_t j = i + 2; j < n && expected; ++j) {
+        if (i == 0 && j == n - 1) continue;
+        if (meet(a, b, v[j], v[(j + 1) % n])) expected = false;
+      }
+    }
+    simple += expected;
+    EXPECT_EQ(IsSimplePolygon(polygon), expected) << draw;
+  }
+  EXPECT_GT(simple, 100);  // both answers were exercised
 }
 
 TEST(ConcaveHull, RotatedLatticeSamplesAndADisk) {
