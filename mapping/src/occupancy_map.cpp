@@ -54,44 +54,56 @@ std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>&
   // Voxel indices within +-2^20 per axis, e.g. +-52 km at 5 cm; points beyond are dropped (no
   // range image reaches that far).
   constexpr double kHalf = 1 << 20;
-  std::vector<Eigen::Vector3i> keys;
-  std::vector<std::uint32_t> source;  // index of each key's point
-  keys.reserve(points.size());
-  source.reserve(points.size());
+  // Neighbouring points of a range image mostly share a voxel: consecutive kept points with one
+  // voxel form a run, and the runs are what gets sorted.
+  struct Run {
+    Eigen::Vector3i key;
+    std::uint32_t begin, end;  ///< points[begin, end), all kept
+  };
+  std::vector<Run> runs;
   Eigen::Vector3i lo = Eigen::Vector3i::Constant(std::numeric_limits<int>::max());
   Eigen::Vector3i hi = Eigen::Vector3i::Constant(std::numeric_limits<int>::min());
+  bool open = false;  // the last run ends at the previous point
   for (std::size_t i = 0; i < points.size(); ++i) {
     const Eigen::Vector3f& p = points[i];
-    if (!p.allFinite()) continue;
     Eigen::Vector3i key;
-    bool inside = true;
+    bool inside = p.allFinite();
     for (int a = 0; a < 3 && inside; ++a) {
       // Inside exactly when its floor is (the bounds are integers).
       const double q = p[a] / voxel;
       inside = q >= -kHalf && q < kHalf;
       key[a] = inside ? registration::FloorToInt(q) : 0;
     }
-    if (!inside) continue;
-    keys.push_back(key);
-    source.push_back(static_cast<std::uint32_t>(i));
+    if (!inside) {
+      open = false;
+      continue;
+    }
+    const auto index = static_cast<std::uint32_t>(i);
+    if (open && runs.back().key == key) {
+      runs.back().end = index + 1;
+      continue;
+    }
+    runs.push_back({key, index, index + 1});
+    open = true;
     lo = lo.cwiseMin(key);
     hi = hi.cwiseMax(key);
   }
-  if (keys.empty()) return {};
-  // Keys packed in (x, y, z) order with as many bits per axis as the cloud's extent needs, then
-  // sorted stably (least significant digit first): each voxel's points stay in input order, so
-  // its sum is the same whatever the sort, and the centroids come out in (x, y, z) voxel order.
+  if (runs.empty()) return {};
+  // Voxels packed in (x, y, z) order with as many bits per axis as the cloud's extent needs, and
+  // the runs sorted stably by them (least significant digit first): a voxel's runs stay in input
+  // order, so its points are summed in input order whatever the sort, and the centroids come out
+  // in (x, y, z) voxel order.
   int bits[3];
   for (int a = 0; a < 3; ++a) {
     bits[a] = 1;
     while ((std::uint64_t{1} << bits[a]) <= static_cast<std::uint64_t>(hi[a] - lo[a])) ++bits[a];
   }
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> sorted(keys.size()), buffer(keys.size());
-  for (std::size_t k = 0; k < keys.size(); ++k) {
-    const Eigen::Vector3i r = keys[k] - lo;
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> sorted(runs.size()), buffer(runs.size());
+  for (std::size_t k = 0; k < runs.size(); ++k) {
+    const Eigen::Vector3i r = runs[k].key - lo;
     sorted[k] = {static_cast<std::uint64_t>(r.x()) << (bits[1] + bits[2]) |
                      static_cast<std::uint64_t>(r.y()) << bits[2] | static_cast<std::uint64_t>(r.z()),
-                 source[k]};
+                 static_cast<std::uint32_t>(k)};
   }
   constexpr int kDigitBits = 11;
   std::vector<std::uint32_t> start(std::size_t{1} << kDigitBits);
@@ -107,12 +119,14 @@ std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>&
   std::vector<Eigen::Vector3f> out;
   for (std::size_t k = 0; k < sorted.size();) {
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    std::size_t end = k;
-    for (; end < sorted.size() && sorted[end].first == sorted[k].first; ++end) {
-      sum += points[sorted[end].second].cast<double>();
+    std::size_t count = 0;
+    const std::uint64_t voxel_key = sorted[k].first;
+    for (; k < sorted.size() && sorted[k].first == voxel_key; ++k) {
+      const Run& run = runs[sorted[k].second];
+      for (std::uint32_t i = run.begin; i < run.end; ++i) sum += points[i].cast<double>();
+      count += run.end - run.begin;
     }
-    out.push_back((sum / static_cast<double>(end - k)).cast<float>());
-    k = end;
+    out.push_back((sum / static_cast<double>(count)).cast<float>());
   }
   return out;
 }
