@@ -118,6 +118,40 @@ __attribute__((target("avx2"))) void ApproximateAzimuthsAvx2(const float* xyzw, 
   ApproximateAzimuthsBody(xyzw, n, out);
 }
 
+/// Every point's range, summed as Eigen's norm() sums it (x^2 + (y^2 + z^2)), and its column
+/// position (pi - azimuth) cols / (2 pi) from the approximate azimuth, in a loop the compiler
+/// vectorises. ProjectToRangeImage checks the column against the margin.
+inline void RangesAndColumnsBody(const float* xyzw, const float* azimuths, std::size_t n,
+                                 double columns_per_radian, double* ranges, double* columns) {
+  for (std::size_t i = 0; i < n; ++i) {
+    const double x = xyzw[4 * i], y = xyzw[4 * i + 1], z = xyzw[4 * i + 2];
+    ranges[i] = std::sqrt(x * x + (y * y + z * z));
+    columns[i] = (kPi - static_cast<double>(azimuths[i])) * columns_per_radian;
+  }
+}
+
+__attribute__((target("avx2"))) void RangesAndColumnsAvx2(const float* xyzw, const float* azimuths,
+                                                          std::size_t n, double columns_per_radian,
+                                                          double* ranges, double* columns) {
+  RangesAndColumnsBody(xyzw, azimuths, n, columns_per_radian, ranges, columns);
+}
+
+/// Every point's slope z / r, r = sqrt(x^2 + y^2); NaN where r is 0 or not finite, or z is not
+/// finite. In a loop the compiler vectorises.
+inline void SlopesBody(const float* xyzw, std::size_t n, double* slopes) {
+  constexpr double kMax = std::numeric_limits<double>::max();
+  for (std::size_t i = 0; i < n; ++i) {
+    const double x = xyzw[4 * i], y = xyzw[4 * i + 1], z = xyzw[4 * i + 2];
+    const double r = std::sqrt(x * x + y * y);
+    const bool valid = std::abs(r) <= kMax && std::abs(z) <= kMax && r != 0.0;
+    slopes[i] = valid ? z / r : std::numeric_limits<double>::quiet_NaN();
+  }
+}
+
+__attribute__((target("avx2"))) void SlopesAvx2(const float* xyzw, std::size_t n, double* slopes) {
+  SlopesBody(xyzw, n, slopes);
+}
+
 /// True when `az` (an approximation) may lie on the other side of 0, +-pi/2 or +-pi than
 /// std::atan2's value: the values the ring recovery compares azimuths with.
 bool NearQuadrantEdge(float az) {
@@ -186,16 +220,27 @@ int RecoverRingsAndAzimuths(const std::vector<LidarPoint>& scan, std::vector<int
   const int count = scan.empty() ? 0 : ring + 1;
   // Renumber by mean slope z / r (elevation's tangent), highest first, so rows go top to bottom.
   // A laser's points share one elevation up to noise, so this is the order of the elevations.
+  // The slopes are computed in vector code; each ring's sum runs in a register, in scan order.
+  std::vector<double> slopes(scan.size());
+  if (!scan.empty()) {
+    static const bool avx2 = __builtin_cpu_supports("avx2");
+    (avx2 ? SlopesAvx2 : SlopesBody)(scan.front().data(), scan.size(), slopes.data());
+  }
   std::vector<double> sum(count, 0.0);
   std::vector<std::size_t> num(count, 0);
+  int current = 0;
+  double running = 0.0;
   for (std::size_t i = 0; i < scan.size(); ++i) {
-    const LidarPoint& p = scan[i];
-    const double x = p.x(), y = p.y();
-    const double r = std::sqrt(x * x + y * y);
-    if (!std::isfinite(r) || !std::isfinite(p.z()) || r == 0) continue;
-    sum[(*rings)[i]] += p.z() / r;
-    ++num[(*rings)[i]];
+    if (std::isnan(slopes[i])) continue;
+    if ((*rings)[i] != current) {
+      sum[current] = running;
+      current = (*rings)[i];
+      running = sum[current];
+    }
+    running += slopes[i];
+    ++num[current];
   }
+  if (count > 0) sum[current] = running;
   std::vector<int> order(count);
   for (int k = 0; k < count; ++k) order[k] = k;
   auto mean = [&](int k) { return num[k] ? sum[k] / num[k] : -1e9; };
@@ -231,9 +276,16 @@ OrganizedCloud ProjectToRangeImage(const std::vector<LidarPoint>& scan, const Se
   // Columns and the half-column leans change at multiples of half a column: an azimuth within
   // the margin of one is computed exactly.
   const double margin = 2.0 * kAzimuthMargin / (2.0 * kPi) * cols;  // in half columns
+  std::vector<double> ranges(scan.size()), columns(scan.size());
+  if (!scan.empty()) {
+    static const bool avx2 = __builtin_cpu_supports("avx2");
+    (avx2 ? RangesAndColumnsAvx2 : RangesAndColumnsBody)(scan.front().data(), azimuths.data(),
+                                                         scan.size(), cols / (2.0 * kPi),
+                                                         ranges.data(), columns.data());
+  }
   for (std::size_t i = 0; i < scan.size(); ++i) {
     const LidarPoint& p = scan[i];
-    const double range = p.head<3>().cast<double>().norm();
+    const double range = ranges[i];
     if (!std::isfinite(range) || range == 0.0) {
       ++s.invalid;
       continue;
@@ -252,10 +304,10 @@ OrganizedCloud ProjectToRangeImage(const std::vector<LidarPoint>& scan, const Se
         continue;
       }
     }
-    const auto column_of = [&](double az) { return (kPi - az) / (2.0 * kPi) * cols; };
-    double u = column_of(azimuths[i]);  // az in (-pi, pi]
+    double u = columns[i];
     if (!(std::abs(2.0 * u - std::round(2.0 * u)) >= margin)) {  // also where NaN
-      u = column_of(std::atan2(p.y(), p.x()));
+      const double az = std::atan2(p.y(), p.x());                // (-pi, pi]
+      u = (kPi - az) / (2.0 * kPi) * cols;
     }
     const int col = std::clamp(static_cast<int>(std::floor(u)), 0, cols - 1);
     const std::size_t row_start = static_cast<std::size_t>(row) * cols;
