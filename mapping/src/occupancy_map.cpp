@@ -57,74 +57,71 @@ std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>&
   // Neighbouring points of a range image mostly share a voxel: consecutive kept points with one
   // voxel form a run, and the runs are what gets sorted.
   struct Run {
-    Eigen::Vector3i key;
+    std::uint64_t voxel;       ///< the key packed, x highest (21 bits per axis offset by 2^20)
     std::uint32_t begin, end;  ///< points[begin, end), all kept
   };
   std::vector<Run> runs;
-  Eigen::Vector3i lo = Eigen::Vector3i::Constant(std::numeric_limits<int>::max());
-  Eigen::Vector3i hi = Eigen::Vector3i::Constant(std::numeric_limits<int>::min());
-  bool open = false;  // the last run ends at the previous point
+  std::uint64_t lo[3] = {~std::uint64_t{0}, ~std::uint64_t{0}, ~std::uint64_t{0}}, hi[3] = {};
   for (std::size_t i = 0; i < points.size(); ++i) {
     const Eigen::Vector3f& p = points[i];
-    Eigen::Vector3i key;
+    std::uint64_t voxel_key = 0;
     bool inside = p.allFinite();
     for (int a = 0; a < 3 && inside; ++a) {
       // Inside exactly when its floor is (the bounds are integers).
       const double q = p[a] / voxel;
       inside = q >= -kHalf && q < kHalf;
-      key[a] = inside ? registration::FloorToInt(q) : 0;
-    }
-    if (!inside) {
-      open = false;
-      continue;
+      if (inside) {
+        voxel_key = voxel_key << 21 | static_cast<std::uint64_t>(registration::FloorToInt(q) + (1 << 20));
+      }
     }
     const auto index = static_cast<std::uint32_t>(i);
-    if (open && runs.back().key == key) {
+    if (!inside) continue;
+    if (!runs.empty() && runs.back().end == index && runs.back().voxel == voxel_key) {
       runs.back().end = index + 1;
-      continue;
+    } else {
+      runs.push_back({voxel_key, index, index + 1});
+      for (int a = 0; a < 3; ++a) {
+        const std::uint64_t field = voxel_key >> (42 - 21 * a) & ((1u << 21) - 1);
+        lo[a] = std::min(lo[a], field);
+        hi[a] = std::max(hi[a], field);
+      }
     }
-    runs.push_back({key, index, index + 1});
-    open = true;
-    lo = lo.cwiseMin(key);
-    hi = hi.cwiseMax(key);
   }
-  if (runs.empty()) return {};
-  // Voxels packed in (x, y, z) order with as many bits per axis as the cloud's extent needs, and
-  // the runs sorted stably by them (least significant digit first): a voxel's runs stay in input
-  // order, so its points are summed in input order whatever the sort, and the centroids come out
-  // in (x, y, z) voxel order.
+  // Repacked with as many bits per axis as the cloud's extent needs: fewer digits to sort by.
   int bits[3];
   for (int a = 0; a < 3; ++a) {
     bits[a] = 1;
-    while ((std::uint64_t{1} << bits[a]) <= static_cast<std::uint64_t>(hi[a] - lo[a])) ++bits[a];
+    while (runs.size() > 0 && (std::uint64_t{1} << bits[a]) <= hi[a] - lo[a]) ++bits[a];
   }
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> sorted(runs.size()), buffer(runs.size());
-  for (std::size_t k = 0; k < runs.size(); ++k) {
-    const Eigen::Vector3i r = runs[k].key - lo;
-    sorted[k] = {static_cast<std::uint64_t>(r.x()) << (bits[1] + bits[2]) |
-                     static_cast<std::uint64_t>(r.y()) << bits[2] | static_cast<std::uint64_t>(r.z()),
-                 static_cast<std::uint32_t>(k)};
+  for (Run& run : runs) {
+    std::uint64_t packed = 0;
+    for (int a = 0; a < 3; ++a) {
+      packed = packed << bits[a] | ((run.voxel >> (42 - 21 * a) & ((1u << 21) - 1)) - lo[a]);
+    }
+    run.voxel = packed;
   }
+  // The runs sorted stably by voxel (radix, least significant digit first): a voxel's runs stay in input order, so its points are summed in input order
+  // whatever the sort, and the centroids come out in (x, y, z) voxel order.
   constexpr int kDigitBits = 11;
+  std::vector<Run> buffer(runs.size());
   std::vector<std::uint32_t> start(std::size_t{1} << kDigitBits);
   for (int shift = 0; shift < bits[0] + bits[1] + bits[2]; shift += kDigitBits) {
     std::fill(start.begin(), start.end(), 0);
-    const auto digit = [&](std::uint64_t key) { return key >> shift & ((1u << kDigitBits) - 1); };
-    for (const auto& item : sorted) ++start[digit(item.first)];
+    const auto digit = [&](const Run& run) { return run.voxel >> shift & ((1u << kDigitBits) - 1); };
+    for (const Run& run : runs) ++start[digit(run)];
     std::uint32_t sum = 0;
     for (std::uint32_t& s : start) sum += std::exchange(s, sum);
-    for (const auto& item : sorted) buffer[start[digit(item.first)]++] = item;
-    sorted.swap(buffer);
+    for (const Run& run : runs) buffer[start[digit(run)]++] = run;
+    runs.swap(buffer);
   }
   std::vector<Eigen::Vector3f> out;
-  for (std::size_t k = 0; k < sorted.size();) {
+  for (std::size_t k = 0; k < runs.size();) {
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
     std::size_t count = 0;
-    const std::uint64_t voxel_key = sorted[k].first;
-    for (; k < sorted.size() && sorted[k].first == voxel_key; ++k) {
-      const Run& run = runs[sorted[k].second];
-      for (std::uint32_t i = run.begin; i < run.end; ++i) sum += points[i].cast<double>();
-      count += run.end - run.begin;
+    const std::uint64_t voxel_key = runs[k].voxel;
+    for (; k < runs.size() && runs[k].voxel == voxel_key; ++k) {
+      for (std::uint32_t i = runs[k].begin; i < runs[k].end; ++i) sum += points[i].cast<double>();
+      count += runs[k].end - runs[k].begin;
     }
     out.push_back((sum / static_cast<double>(count)).cast<float>());
   }
