@@ -71,7 +71,8 @@ std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>&
       const double q = p[a] / voxel;
       inside = q >= -kHalf && q < kHalf;
       if (inside) {
-        voxel_key = voxel_key << 21 | static_cast<std::uint64_t>(registration::FloorToInt(q) + (1 << 20));
+        voxel_key =
+            voxel_key << 21 | static_cast<std::uint64_t>(registration::FloorToInt(q) + (1 << 20));
       }
     }
     const auto index = static_cast<std::uint32_t>(i);
@@ -100,14 +101,17 @@ std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>&
     }
     run.voxel = packed;
   }
-  // The runs sorted stably by voxel (radix, least significant digit first): a voxel's runs stay in input order, so its points are summed in input order
-  // whatever the sort, and the centroids come out in (x, y, z) voxel order.
+  // The runs sorted stably by voxel (radix, least significant digit first): a voxel's runs stay in
+  // input order, so its points are summed in input order whatever the sort, and the centroids come
+  // out in (x, y, z) voxel order.
   constexpr int kDigitBits = 11;
   std::vector<Run> buffer(runs.size());
   std::vector<std::uint32_t> start(std::size_t{1} << kDigitBits);
   for (int shift = 0; shift < bits[0] + bits[1] + bits[2]; shift += kDigitBits) {
     std::fill(start.begin(), start.end(), 0);
-    const auto digit = [&](const Run& run) { return run.voxel >> shift & ((1u << kDigitBits) - 1); };
+    const auto digit = [&](const Run& run) {
+      return run.voxel >> shift & ((1u << kDigitBits) - 1);
+    };
     for (const Run& run : runs) ++start[digit(run)];
     std::uint32_t sum = 0;
     for (std::uint32_t& s : start) sum += std::exchange(s, sum);

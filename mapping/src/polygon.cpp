@@ -125,8 +125,9 @@ bool IsSimplePolygon(const std::vector<Eigen::Vector2d>& polygon) {
     edges[i] = {std::min(a.x(), b.x()), std::max(a.x(), b.x()), std::min(a.y(), b.y()),
                 std::max(a.y(), b.y()), i};
   }
-  std::sort(edges.begin(), edges.end(),
-            [](const Edge& e, const Edge& f) { return e.x0 < f.x0 || (e.x0 == f.x0 && e.i < f.i); });
+  std::sort(edges.begin(), edges.end(), [](const Edge& e, const Edge& f) {
+    return e.x0 < f.x0 || (e.x0 == f.x0 && e.i < f.i);
+  });
   for (std::size_t k = 0; k < n; ++k) {
     const Edge& e = edges[k];
     for (std::size_t m = k + 1; m < n && edges[m].x0 <= e.x1; ++m) {

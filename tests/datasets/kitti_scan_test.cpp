@@ -109,7 +109,8 @@ TEST(KittiScan, ApproximateAzimuthsStayWithinTheirBound) {
   std::uniform_real_distribution<double> angle(-kPi, kPi), exponent(-3.0, 2.0), tiny(-1e-6, 1e-6);
   std::vector<LidarPoint> scan;
   for (int i = 0; i < 1000000; ++i) {
-    const double a = i % 2 ? angle(rng) : std::round(angle(rng) / (kPi / 4)) * (kPi / 4) + tiny(rng);
+    const double a =
+        i % 2 ? angle(rng) : std::round(angle(rng) / (kPi / 4)) * (kPi / 4) + tiny(rng);
     const double r = std::pow(10.0, exponent(rng));
     scan.emplace_back(static_cast<float>(r * std::cos(a)), static_cast<float>(r * std::sin(a)),
                       0.0f, 0.0f);

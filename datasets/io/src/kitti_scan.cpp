@@ -104,8 +104,9 @@ inline void ApproximateAzimuthsBody(const float* xyzw, std::size_t n, float* out
     const float folded = (a - 1.0f) / (a + 1.0f);  // computed either way: no branch in the loop
     const float t = upper ? folded : a;
     const float z = t * t;
-    float r = (((8.05374449538e-2f * z - 1.38776856032e-1f) * z + 1.99777106478e-1f) * z -
-               3.33329491539e-1f) * z * t + t;
+    const float series = ((8.05374449538e-2f * z - 1.38776856032e-1f) * z + 1.99777106478e-1f) * z -
+                         3.33329491539e-1f;
+    float r = series * z * t + t;  // atan(t) for |t| <= tan(pi / 8)
     r = upper ? r + kQuarterPi : r;
     r = ay > ax ? kHalfPi - r : r;
     r = x < 0.0f ? kPiF - r : r;
@@ -157,8 +158,7 @@ __attribute__((target("avx2"))) void SlopesAvx2(const float* xyzw, std::size_t n
 bool NearQuadrantEdge(float az) {
   constexpr float kHalfPi = 1.57079632679489662f, kPiF = 3.14159265358979324f;
   const float a = std::fabs(az);
-  return a < kAzimuthMargin || std::fabs(a - kHalfPi) < kAzimuthMargin ||
-         a > kPiF - kAzimuthMargin;
+  return a < kAzimuthMargin || std::fabs(a - kHalfPi) < kAzimuthMargin || a > kPiF - kAzimuthMargin;
 }
 
 }  // namespace
