@@ -104,92 +104,106 @@ TEST(KittiScan, ScanOrderRingsGiveOneRowPerLaser) {
 // The projection trusts the approximate azimuths to 4e-6 rad (kitti_scan.cpp, kAzimuthMargin);
 // they must be well within it: at most 1e-6 rad from std::atan2 anywhere, here over random
 // directions at ranges from 1 mm to 100 m, directions near the octant edges, and signed zeros.
+/// Runs `check` with the reader's AVX2 loops and with its baseline ones.
+void WithEachVectorWidth(const std::function<void()>& check) {
+  for (const bool avx2 : {true, false}) {
+    SCOPED_TRACE(avx2 ? "AVX2 loops where available" : "baseline loops");
+    internal::UseAvx2Clones(avx2);
+    check();
+  }
+  internal::UseAvx2Clones(true);
+}
+
 TEST(KittiScan, ApproximateAzimuthsStayWithinTheirBound) {
-  std::mt19937 rng(7);
-  std::uniform_real_distribution<double> angle(-kPi, kPi), exponent(-3.0, 2.0), tiny(-1e-6, 1e-6);
-  std::vector<LidarPoint> scan;
-  for (int i = 0; i < 1000000; ++i) {
-    const double a =
-        i % 2 ? angle(rng) : std::round(angle(rng) / (kPi / 4)) * (kPi / 4) + tiny(rng);
-    const double r = std::pow(10.0, exponent(rng));
-    scan.emplace_back(static_cast<float>(r * std::cos(a)), static_cast<float>(r * std::sin(a)),
-                      0.0f, 0.0f);
-  }
-  for (const float x : {-1.0f, -0.0f, 0.0f, 1.0f, 1e-30f, -1e-30f}) {
-    for (const float y : {-1.0f, -0.0f, 0.0f, 1.0f, 1e-30f, -1e-30f}) {
-      if (x != 0.0f || y != 0.0f) scan.emplace_back(x, y, 0.0f, 0.0f);
+  WithEachVectorWidth([] {
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> angle(-kPi, kPi), exponent(-3.0, 2.0), tiny(-1e-6, 1e-6);
+    std::vector<LidarPoint> scan;
+    for (int i = 0; i < 1000000; ++i) {
+      const double a =
+          i % 2 ? angle(rng) : std::round(angle(rng) / (kPi / 4)) * (kPi / 4) + tiny(rng);
+      const double r = std::pow(10.0, exponent(rng));
+      scan.emplace_back(static_cast<float>(r * std::cos(a)), static_cast<float>(r * std::sin(a)),
+                        0.0f, 0.0f);
     }
-  }
-  std::vector<float> approximate;
-  internal::ApproximateAzimuths(scan, &approximate);
-  ASSERT_EQ(approximate.size(), scan.size());
-  double worst = 0.0;
-  for (std::size_t i = 0; i < scan.size(); ++i) {
-    const double exact = std::atan2(scan[i].y(), scan[i].x());
-    worst = std::max(worst, std::abs(std::remainder(approximate[i] - exact, 2.0 * kPi)));
-  }
-  EXPECT_LE(worst, 1e-6);
+    for (const float x : {-1.0f, -0.0f, 0.0f, 1.0f, 1e-30f, -1e-30f}) {
+      for (const float y : {-1.0f, -0.0f, 0.0f, 1.0f, 1e-30f, -1e-30f}) {
+        if (x != 0.0f || y != 0.0f) scan.emplace_back(x, y, 0.0f, 0.0f);
+      }
+    }
+    std::vector<float> approximate;
+    internal::ApproximateAzimuths(scan, &approximate);
+    ASSERT_EQ(approximate.size(), scan.size());
+    double worst = 0.0;
+    for (std::size_t i = 0; i < scan.size(); ++i) {
+      const double exact = std::atan2(scan[i].y(), scan[i].x());
+      worst = std::max(worst, std::abs(std::remainder(approximate[i] - exact, 2.0 * kPi)));
+    }
+    EXPECT_LE(worst, 1e-6);
+  });
 }
 
 // Points placed on column edges and half-column edges (to a few ulps either side) land in the
 // columns, and lean to the sides, that std::atan2's azimuths give.
 TEST(KittiScan, ColumnsAreThoseOfExactAzimuths) {
-  SensorConfig config;
-  config.lidar_row_mode = "elevation";
-  const int cols = config.lidar_cols;
-  const auto exact_u = [&](const LidarPoint& p) {
-    return (kPi - static_cast<double>(std::atan2(p.y(), p.x()))) / (2.0 * kPi) * cols;
-  };
-  const auto on_edge = [&](double u, int ulps) {
-    const double az = kPi - 2.0 * kPi * u / cols;
-    float y = static_cast<float>(7.0 * std::sin(az));
-    for (int k = 0; k < std::abs(ulps); ++k) {
-      y = std::nextafter(y, ulps > 0 ? 1.0f : -1.0f);
-    }
-    return LidarPoint(static_cast<float>(7.0 * std::cos(az)), y, 0.0f, 0.0f);
-  };
-  int straddled = 0;
-  for (int ulps = -4; ulps <= 4; ++ulps) {
-    // Every third column edge: each point has a column of its own.
-    config.lidar_column_shift = 0;
-    std::vector<LidarPoint> scan;
-    std::map<std::pair<float, float>, int> expected;
-    for (int edge = 3; edge < cols; edge += 3) {
-      scan.push_back(on_edge(edge, ulps));
-      const int col = static_cast<int>(std::floor(exact_u(scan.back())));
-      expected[{scan.back().x(), scan.back().y()}] = col;
-      straddled += col < edge;
-    }
-    const OrganizedCloud image = ProjectToRangeImage(scan, config);
-    std::size_t found = 0;
-    for (int c = 0; c < cols; ++c) {
-      for (int r = 0; r < image.height; ++r) {
-        const auto& p = image.at(r, c);
-        if (!OrganizedCloud::IsValid(p)) continue;
-        ++found;
-        EXPECT_EQ(c, expected.at({p.x(), p.y()})) << ulps;
+  WithEachVectorWidth([] {
+    SensorConfig config;
+    config.lidar_row_mode = "elevation";
+    const int cols = config.lidar_cols;
+    const auto exact_u = [&](const LidarPoint& p) {
+      return (kPi - static_cast<double>(std::atan2(p.y(), p.x()))) / (2.0 * kPi) * cols;
+    };
+    const auto on_edge = [&](double u, int ulps) {
+      const double az = kPi - 2.0 * kPi * u / cols;
+      float y = static_cast<float>(7.0 * std::sin(az));
+      for (int k = 0; k < std::abs(ulps); ++k) {
+        y = std::nextafter(y, ulps > 0 ? 1.0f : -1.0f);
+      }
+      return LidarPoint(static_cast<float>(7.0 * std::cos(az)), y, 0.0f, 0.0f);
+    };
+    int straddled = 0;
+    for (int ulps = -4; ulps <= 4; ++ulps) {
+      // Every third column edge: each point has a column of its own.
+      config.lidar_column_shift = 0;
+      std::vector<LidarPoint> scan;
+      std::map<std::pair<float, float>, int> expected;
+      for (int edge = 3; edge < cols; edge += 3) {
+        scan.push_back(on_edge(edge, ulps));
+        const int col = static_cast<int>(std::floor(exact_u(scan.back())));
+        expected[{scan.back().x(), scan.back().y()}] = col;
+        straddled += col < edge;
+      }
+      const OrganizedCloud image = ProjectToRangeImage(scan, config);
+      std::size_t found = 0;
+      for (int c = 0; c < cols; ++c) {
+        for (int r = 0; r < image.height; ++r) {
+          const auto& p = image.at(r, c);
+          if (!OrganizedCloud::IsValid(p)) continue;
+          ++found;
+          EXPECT_EQ(c, expected.at({p.x(), p.y()})) << ulps;
+        }
+      }
+      EXPECT_EQ(found, scan.size());
+      // A point on a half-column edge whose cell is taken moves to the side it leans to.
+      config.lidar_column_shift = 1;
+      for (const int col : {1, 500, 1041, 1042, 2000}) {
+        const LidarPoint blocker = on_edge(col + 0.25, 0);
+        const LidarPoint point = on_edge(col + 0.5, ulps);
+        if (static_cast<int>(std::floor(exact_u(point))) != col) continue;
+        const int side = exact_u(point) - col < 0.5 ? -1 : 1;
+        const OrganizedCloud pair = ProjectToRangeImage({blocker, point}, config);
+        const int row = [&] {
+          for (int r = 0; r < pair.height; ++r) {
+            if (OrganizedCloud::IsValid(pair.at(r, col))) return r;
+          }
+          return -1;
+        }();
+        ASSERT_GE(row, 0);
+        EXPECT_EQ(pair.at(row, col + side).y(), point.y()) << col << " " << ulps;
       }
     }
-    EXPECT_EQ(found, scan.size());
-    // A point on a half-column edge whose cell is taken moves to the side it leans to.
-    config.lidar_column_shift = 1;
-    for (const int col : {1, 500, 1041, 1042, 2000}) {
-      const LidarPoint blocker = on_edge(col + 0.25, 0);
-      const LidarPoint point = on_edge(col + 0.5, ulps);
-      if (static_cast<int>(std::floor(exact_u(point))) != col) continue;
-      const int side = exact_u(point) - col < 0.5 ? -1 : 1;
-      const OrganizedCloud pair = ProjectToRangeImage({blocker, point}, config);
-      const int row = [&] {
-        for (int r = 0; r < pair.height; ++r) {
-          if (OrganizedCloud::IsValid(pair.at(r, col))) return r;
-        }
-        return -1;
-      }();
-      ASSERT_GE(row, 0);
-      EXPECT_EQ(pair.at(row, col + side).y(), point.y()) << col << " " << ulps;
-    }
-  }
-  EXPECT_GT(straddled, 0);  // the edges were straddled: some points fell left of them
+    EXPECT_GT(straddled, 0);  // the edges were straddled: some points fell left of them
+  });
 }
 
 TEST(KittiScan, CollisionsKeepTheNearerPoint) {

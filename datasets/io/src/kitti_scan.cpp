@@ -1,6 +1,7 @@
 #include "planeslam/datasets/kitti_scan.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -93,6 +94,21 @@ namespace {
 // azimuth is computed again with std::atan2, so the decisions are exactly those of std::atan2.
 constexpr float kAzimuthMargin = 4e-6f;
 
+// The vector loops below are compiled twice: for the baseline and, on x86-64, for AVX2 (taken
+// where the processor has it). The code is the same; only the vector width differs.
+std::atomic<bool> avx2_clones{true};  // internal::UseAvx2Clones
+
+#if defined(__x86_64__)
+#define PLANESLAM_AVX2_CLONE __attribute__((target("avx2")))
+bool HasAvx2() {
+  static const bool avx2 = __builtin_cpu_supports("avx2");
+  return avx2 && avx2_clones.load(std::memory_order_relaxed);
+}
+#else
+#define PLANESLAM_AVX2_CLONE
+bool HasAvx2() { return false; }
+#endif
+
 inline void ApproximateAzimuthsBody(const float* xyzw, std::size_t n, float* out) {
   constexpr float kHalfPi = 1.57079632679489662f, kQuarterPi = 0.785398163397448310f;
   constexpr float kPiF = 3.14159265358979324f, kTanEighthPi = 0.414213562373095049f;
@@ -114,8 +130,7 @@ inline void ApproximateAzimuthsBody(const float* xyzw, std::size_t n, float* out
   }
 }
 
-__attribute__((target("avx2"))) void ApproximateAzimuthsAvx2(const float* xyzw, std::size_t n,
-                                                             float* out) {
+PLANESLAM_AVX2_CLONE void ApproximateAzimuthsAvx2(const float* xyzw, std::size_t n, float* out) {
   ApproximateAzimuthsBody(xyzw, n, out);
 }
 
@@ -131,9 +146,9 @@ inline void RangesAndColumnsBody(const float* xyzw, const float* azimuths, std::
   }
 }
 
-__attribute__((target("avx2"))) void RangesAndColumnsAvx2(const float* xyzw, const float* azimuths,
-                                                          std::size_t n, double columns_per_radian,
-                                                          double* ranges, double* columns) {
+PLANESLAM_AVX2_CLONE void RangesAndColumnsAvx2(const float* xyzw, const float* azimuths,
+                                               std::size_t n, double columns_per_radian,
+                                               double* ranges, double* columns) {
   RangesAndColumnsBody(xyzw, azimuths, n, columns_per_radian, ranges, columns);
 }
 
@@ -149,7 +164,7 @@ inline void SlopesBody(const float* xyzw, std::size_t n, double* slopes) {
   }
 }
 
-__attribute__((target("avx2"))) void SlopesAvx2(const float* xyzw, std::size_t n, double* slopes) {
+PLANESLAM_AVX2_CLONE void SlopesAvx2(const float* xyzw, std::size_t n, double* slopes) {
   SlopesBody(xyzw, n, slopes);
 }
 
@@ -165,12 +180,13 @@ bool NearQuadrantEdge(float az) {
 
 namespace internal {
 
+void UseAvx2Clones(bool use) { avx2_clones.store(use, std::memory_order_relaxed); }
+
 void ApproximateAzimuths(const std::vector<LidarPoint>& scan, std::vector<float>* azimuths) {
   static_assert(sizeof(LidarPoint) == 4 * sizeof(float), "LidarPoint is four packed floats");
   azimuths->resize(scan.size());
-  static const bool avx2 = __builtin_cpu_supports("avx2");
   const float* xyzw = scan.empty() ? nullptr : scan.front().data();
-  if (avx2) {
+  if (HasAvx2()) {
     ApproximateAzimuthsAvx2(xyzw, scan.size(), azimuths->data());
   } else {
     ApproximateAzimuthsBody(xyzw, scan.size(), azimuths->data());
@@ -223,8 +239,7 @@ int RecoverRingsAndAzimuths(const std::vector<LidarPoint>& scan, std::vector<int
   // The slopes are computed in vector code; each ring's sum runs in a register, in scan order.
   std::vector<double> slopes(scan.size());
   if (!scan.empty()) {
-    static const bool avx2 = __builtin_cpu_supports("avx2");
-    (avx2 ? SlopesAvx2 : SlopesBody)(scan.front().data(), scan.size(), slopes.data());
+    (HasAvx2() ? SlopesAvx2 : SlopesBody)(scan.front().data(), scan.size(), slopes.data());
   }
   std::vector<double> sum(count, 0.0);
   std::vector<std::size_t> num(count, 0);
@@ -278,10 +293,9 @@ OrganizedCloud ProjectToRangeImage(const std::vector<LidarPoint>& scan, const Se
   const double margin = 2.0 * kAzimuthMargin / (2.0 * kPi) * cols;  // in half columns
   std::vector<double> ranges(scan.size()), columns(scan.size());
   if (!scan.empty()) {
-    static const bool avx2 = __builtin_cpu_supports("avx2");
-    (avx2 ? RangesAndColumnsAvx2 : RangesAndColumnsBody)(scan.front().data(), azimuths.data(),
-                                                         scan.size(), cols / (2.0 * kPi),
-                                                         ranges.data(), columns.data());
+    (HasAvx2() ? RangesAndColumnsAvx2 : RangesAndColumnsBody)(scan.front().data(), azimuths.data(),
+                                                              scan.size(), cols / (2.0 * kPi),
+                                                              ranges.data(), columns.data());
   }
   for (std::size_t i = 0; i < scan.size(); ++i) {
     const LidarPoint& p = scan[i];

@@ -52,6 +52,9 @@ namespace internal {
 /// atan2(y, x) of every point, approximately (within 1e-6 rad of std::atan2; exposed for its
 /// test): the projection's first guess at each azimuth.
 void ApproximateAzimuths(const std::vector<LidarPoint>& scan, std::vector<float>* azimuths);
+/// Whether the reader's vector loops may take their AVX2 versions where the processor has them
+/// (default true); false takes the baseline versions everywhere (for tests of both).
+void UseAvx2Clones(bool use);
 }  // namespace internal
 
 /// Reads a .bin and projects it with the config (and its range limits).
