@@ -101,9 +101,6 @@ TEST(KittiScan, ScanOrderRingsGiveOneRowPerLaser) {
   EXPECT_EQ(ustats.placed + ustats.collisions + ustats.outside_elevation, scan.size());
 }
 
-// The projection trusts the approximate azimuths to 4e-6 rad (kitti_scan.cpp, kAzimuthMargin);
-// they must be well within it: at most 1e-6 rad from std::atan2 anywhere, here over random
-// directions at ranges from 1 mm to 100 m, directions near the octant edges, and signed zeros.
 /// Runs `check` with the reader's AVX2 loops and with its baseline ones.
 void WithEachVectorWidth(const std::function<void()>& check) {
   for (const bool avx2 : {true, false}) {
@@ -114,6 +111,9 @@ void WithEachVectorWidth(const std::function<void()>& check) {
   internal::UseAvx2Clones(true);
 }
 
+// The projection trusts the approximate azimuths to 4e-6 rad (kitti_scan.cpp, kAzimuthMargin);
+// they must be well within it: at most 1e-6 rad from std::atan2 anywhere, here over random
+// directions at ranges from 1 mm to 100 m, directions near the octant edges, and signed zeros.
 TEST(KittiScan, ApproximateAzimuthsStayWithinTheirBound) {
   WithEachVectorWidth([] {
     std::mt19937 rng(7);
