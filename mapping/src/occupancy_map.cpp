@@ -75,8 +75,8 @@ std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>&
             voxel_key << 21 | static_cast<std::uint64_t>(registration::FloorToInt(q) + (1 << 20));
       }
     }
-    const auto index = static_cast<std::uint32_t>(i);
     if (!inside) continue;
+    const auto index = static_cast<std::uint32_t>(i);
     if (!runs.empty() && runs.back().end == index && runs.back().voxel == voxel_key) {
       runs.back().end = index + 1;
     } else {

@@ -1,14 +1,15 @@
 #include "planeslam/mapping/plane_map.hpp"
 
+#include <absl/container/flat_hash_map.h>
+
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <utility>
 
-#include <absl/container/flat_hash_map.h>
-
 #include "planeslam/datasets/errors.hpp"
+#include "planeslam/registration/voxel_index.hpp"
 
 namespace planeslam::mapping {
 namespace {
@@ -25,12 +26,8 @@ std::int64_t CellKey(std::int64_t i, std::int64_t j) {
                                    static_cast<std::uint64_t>(static_cast<std::uint32_t>(j)));
 }
 
-/// floor(x / cell), without a libm call (the build targets x86-64 without SSE4.1's rounding
-/// instruction): the value of static_cast<std::int64_t>(std::floor(x / cell)) wherever defined.
 std::int64_t FloorIndex(double x, double cell) {
-  const double q = x / cell;
-  const auto truncated = static_cast<std::int64_t>(q);
-  return truncated - (static_cast<double>(truncated) > q ? 1 : 0);
+  return registration::FloorToInt<std::int64_t>(x / cell);
 }
 
 std::int64_t CellI(std::int64_t key) { return key >> 32; }

@@ -186,11 +186,8 @@ void ApproximateAzimuths(const std::vector<LidarPoint>& scan, std::vector<float>
   static_assert(sizeof(LidarPoint) == 4 * sizeof(float), "LidarPoint is four packed floats");
   azimuths->resize(scan.size());
   const float* xyzw = scan.empty() ? nullptr : scan.front().data();
-  if (HasAvx2()) {
-    ApproximateAzimuthsAvx2(xyzw, scan.size(), azimuths->data());
-  } else {
-    ApproximateAzimuthsBody(xyzw, scan.size(), azimuths->data());
-  }
+  (HasAvx2() ? ApproximateAzimuthsAvx2 : ApproximateAzimuthsBody)(xyzw, scan.size(),
+                                                                  azimuths->data());
 }
 
 }  // namespace internal
@@ -202,9 +199,10 @@ namespace {
 int RecoverRingsAndAzimuths(const std::vector<LidarPoint>& scan, std::vector<int>* rings,
                             std::vector<float>* azimuths) {
   rings->assign(scan.size(), 0);
-  std::vector<float> approximate;
-  internal::ApproximateAzimuths(scan, &approximate);
-  if (azimuths) azimuths->assign(scan.size(), std::numeric_limits<float>::quiet_NaN());
+  // Approximated in place, then made exact where a comparison needs it and NaN where undefined.
+  std::vector<float> own;
+  std::vector<float>& az_of = azimuths ? *azimuths : own;
+  internal::ApproximateAzimuths(scan, &az_of);
   // KITTI stores each laser as one counter-clockwise sweep that starts just left of straight
   // ahead (azimuth 0+), wraps from +pi to -pi behind the car and ends just right of ahead (0-).
   // A new laser starts where the azimuth crosses from slightly negative to slightly positive
@@ -216,12 +214,11 @@ int RecoverRingsAndAzimuths(const std::vector<LidarPoint>& scan, std::vector<int
     const LidarPoint& p = scan[i];
     if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || (p.x() == 0 && p.y() == 0)) {
       (*rings)[i] = ring;
+      az_of[i] = std::numeric_limits<float>::quiet_NaN();
       continue;
     }
-    const float az_float =
-        NearQuadrantEdge(approximate[i]) ? std::atan2(p.y(), p.x()) : approximate[i];
-    if (azimuths) (*azimuths)[i] = az_float;
-    const double az = az_float;
+    if (NearQuadrantEdge(az_of[i])) az_of[i] = std::atan2(p.y(), p.x());
+    const double az = az_of[i];
     if (std::isfinite(prev)) {
       if (prev > kPi / 2 && az < -kPi / 2) {
         wrapped = true;

@@ -12,10 +12,11 @@
 
 namespace planeslam::registration {
 
-/// floor(x) as an int, without a libm call (the build targets x86-64 without SSE4.1's rounding
-/// instruction): the same value as static_cast<int>(std::floor(x)) wherever that is defined.
-inline int FloorToInt(double x) {
-  const int truncated = static_cast<int>(x);
+/// floor(x) as an Int, without a libm call (the build targets x86-64 without SSE4.1's rounding
+/// instruction): the same value as static_cast<Int>(std::floor(x)) wherever that is defined.
+template <typename Int = int>
+inline Int FloorToInt(double x) {
+  const Int truncated = static_cast<Int>(x);
   return truncated - (static_cast<double>(truncated) > x ? 1 : 0);
 }
 
