@@ -121,6 +121,27 @@ void SlamSystem::AddKeyframe(std::size_t frame, const Pose& T_world_sensor,
   stats_.time_map_ms += ElapsedMs(start);
 }
 
+void SlamSystem::DropImplausibleMatches(const Keyframe& keyframe,
+                                        const detection::Segmentation& segmentation,
+                                        const registration::MotionPrior& prior,
+                                        const registration::MotionPrior& gate_prior,
+                                        registration::RegistrationResult* reg) const {
+  // Only a result the prediction finds suspect (its innovation beyond the 99 % quantile of
+  // chi-square with 6 dof) is checked pair by pair: there one wrong pair, a small plane matched
+  // to another, can hold a direction and still pass the 99.9 % gate with its own uncertainty.
+  constexpr double kSuspectChi2 = 16.81;
+  if (!reg->converged || !(registration::PriorInnovationChi2(*reg, gate_prior) > kSuspectChi2)) {
+    return;
+  }
+  const std::vector<registration::PlaneMatch> plausible = registration::PlausibleMatches(
+      keyframe.planes, segmentation.planes, reg->inliers, gate_prior, registration_config_);
+  // Where no pair agrees with the prediction, the prediction is the likelier culprit.
+  if (plausible.empty() || plausible.size() == reg->inliers.size()) return;
+  registration::RegistrationResult again = registration::RegisterPlanes(
+      keyframe.planes, segmentation.planes, plausible, prior, registration_config_);
+  if (again.converged) *reg = std::move(again);
+}
+
 SlamFrameResult SlamSystem::ProcessFrame(double timestamp, const datasets::OrganizedCloud& cloud,
                                          const detection::Segmentation& segmentation) {
   const auto start = std::chrono::steady_clock::now();
@@ -296,9 +317,19 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
   prior.covariance = covariance_keyframe_last_ + DiagonalCovariance(config_.prior_translation_sigma,
                                                                     config_.prior_rotation_sigma);
   if (!first_cloud_.empty()) BootstrapPrior(&first_cloud_, cloud, local_map_->voxel_size(), &prior);
-  const registration::AssociationResult association = registration::AssociatePlanes(
-      keyframe.planes, segmentation.planes, prior, association_config_, registration_config_);
-  registration::RegistrationResult reg = association.registration;
+  // The change of velocity that is plausible in one frame (gate_*_sigma), not the association's
+  // loose prior: the innovation gate below and the check of single pairs use it.
+  registration::MotionPrior gate_prior = prior;
+  gate_prior.covariance =
+      covariance_keyframe_last_ +
+      DiagonalCovariance(config_.gate_translation_sigma, config_.gate_rotation_sigma);
+  registration::RegistrationResult reg =
+      registration::AssociatePlanes(keyframe.planes, segmentation.planes, prior,
+                                    association_config_, registration_config_)
+          .registration;
+  if (config_.prior_gate_chi2 > 0) {
+    DropImplausibleMatches(keyframe, segmentation, prior, gate_prior, &reg);
+  }
   result.used_point_to_plane = FillFromDepthImage(keyframe.id, cloud, segmentation.labels, &reg);
   FillFromExtents(config_, keyframe.planes, keyframe.extents, cloud, segmentation, &reg);
   if (reg.converged && local_map_ && !structure.empty()) {
@@ -311,12 +342,7 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
   result.degenerate = reg.degenerate || !reg.converged;
   if (result.used_point_to_plane) ++stats_.point_to_plane_frames;
   if (reg.converged && config_.prior_gate_chi2 > 0) {
-    // Innovation of the result against the constant-velocity prediction, under the change of
-    // velocity that is plausible in one frame (gate_*_sigma), not the association's loose prior.
-    registration::MotionPrior gate_prior = prior;
-    gate_prior.covariance =
-        covariance_keyframe_last_ +
-        DiagonalCovariance(config_.gate_translation_sigma, config_.gate_rotation_sigma);
+    // Innovation of the result against the constant-velocity prediction.
     const double chi2 = registration::PriorInnovationChi2(reg, gate_prior);
     if (!(chi2 <= config_.prior_gate_chi2) &&
         consecutive_refusals_ < config_.prior_gate_max_refusals) {

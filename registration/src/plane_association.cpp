@@ -13,6 +13,7 @@
 
 #include "plane_residual.hpp"
 #include "planeslam/datasets/errors.hpp"
+#include "prior_step.hpp"
 
 namespace planeslam::registration {
 
@@ -536,6 +537,42 @@ AssociationResult AssociatePlanes(const std::vector<detection::Plane>& prev,
   out.matches = best->matches;
   out.registration = best->registration;
   return out;
+}
+
+std::vector<PlaneMatch> PlausibleMatches(const std::vector<detection::Plane>& prev,
+                                         const std::vector<detection::Plane>& curr,
+                                         const std::vector<PlaneMatch>& matches,
+                                         const MotionPrior& motion,
+                                         const RegistrationConfig& config) {
+  const Pose& T = motion.T_prev_curr;
+  const Eigen::Matrix3d translation_cov = motion.covariance.topLeftCorner<3, 3>();
+  const double rotation_var = motion.covariance.bottomRightCorner<3, 3>().trace() / 3.0;
+  const double normal_floor = 2.0 * config.min_normal_sigma * config.min_normal_sigma;
+  const double offset_floor = 2.0 * config.min_offset_sigma * config.min_offset_sigma;
+  const double gate = internal::Chi2Quantile999(2.0);
+  std::vector<PlaneMatch> plausible;
+  for (const PlaneMatch& m : matches) {
+    const detection::Plane& p = prev.at(static_cast<std::size_t>(m.prev));
+    const detection::Plane& c = curr.at(static_cast<std::size_t>(m.curr));
+    const Eigen::Matrix4d cov_p =
+        config.covariance_scale * PlaneCovarianceOrFallback(p, config.fallback_point_sigma);
+    const Eigen::Matrix4d cov_c =
+        config.covariance_scale * PlaneCovarianceOrFallback(c, config.fallback_point_sigma);
+    const double sign = m.flip_curr ? -1.0 : 1.0;
+    const Eigen::Vector3d n = T.linear() * (sign * c.normal);
+    const double d = sign * c.d + n.dot(T.translation());
+    const double angle = std::acos(std::clamp(n.dot(p.normal), -1.0, 1.0));
+    // Per tangent axis: half the trace of a unit normal's (rank-2) covariance.
+    const double angle_var =
+        0.5 * (cov_p.topLeftCorner<3, 3>().trace() + cov_c.topLeftCorner<3, 3>().trace()) +
+        normal_floor + rotation_var;
+    const double offset_var = cov_p(3, 3) + cov_c(3, 3) + offset_floor +
+                              n.dot(translation_cov * n) +
+                              rotation_var * (T * c.centroid).squaredNorm();
+    const double chi2 = angle * angle / angle_var + (d - p.d) * (d - p.d) / offset_var;
+    if (chi2 <= gate) plausible.push_back(m);
+  }
+  return plausible;
 }
 
 }  // namespace planeslam::registration

@@ -267,5 +267,49 @@ TEST(PlaneAssociation, DegenerateInputsNeverFail) {
   }
 }
 
+/// A plane pair seen across a motion predicted with the uncertainty of `motion`: both planes carry
+/// noise drawn from their reported covariances, the prediction is off by a draw from the motion's.
+TEST(PlaneAssociation, PlausibleMatchesKeepTruePairsAndDropPairsOfOtherPlanes) {
+  std::mt19937 rng(57);
+  std::normal_distribution<double> g(0.0, 1.0);
+  RegistrationConfig config;
+  config.covariance_scale = 1.0;  // the drawn noise is what the planes report
+  config.min_normal_sigma = 0.0;
+  config.min_offset_sigma = 0.0;
+  Matrix6d motion_cov = Matrix6d::Zero();
+  motion_cov.diagonal() << 1e-4, 1e-4, 1e-4, 2.5e-5, 2.5e-5, 2.5e-5;  // 1 cm, 0.005 rad
+  const Eigen::Matrix3d plane_noise = Eigen::Vector3d(4e-6, 4e-6, 2.5e-5).asDiagonal();
+  std::uniform_real_distribution<double> offset(0.5, 4.0);
+  const int draws = 2000;
+  int true_dropped = 0, wrong_kept = 0;
+  for (int i = 0; i < draws; ++i) {
+    const Pose T = RandomPose(rng, 0.05, 3.0 * M_PI / 180.0);
+    const detection::Plane truth_curr = test::RandomPlane(rng, offset);
+    Vector6d e;
+    for (int k = 0; k < 6; ++k) e(k) = std::sqrt(motion_cov(k, k)) * g(rng);
+    MotionPrior motion;
+    motion.T_prev_curr = BoxPlus(T, e);
+    motion.covariance = motion_cov;
+    const detection::Plane prev = test::AddPlaneNoise(MovePlane(truth_curr, T), plane_noise, rng);
+    const detection::Plane curr = test::AddPlaneNoise(truth_curr, plane_noise, rng);
+    // Another plane: 2 deg and 2 cm from the true one.
+    detection::Plane other = truth_curr;
+    other.normal =
+        Eigen::AngleAxisd(2.0 * M_PI / 180.0, TangentBasis(other.normal).col(0)) * other.normal;
+    other.d += 0.02;
+    other = test::AddPlaneNoise(other, plane_noise, rng);
+    const std::vector<detection::Plane> prevs{prev}, currs{curr, other};
+    const std::vector<PlaneMatch> pairs{{0, 0, false}, {0, 1, false}};
+    const std::vector<PlaneMatch> kept = PlausibleMatches(prevs, currs, pairs, motion, config);
+    true_dropped += std::count(kept.begin(), kept.end(), pairs[0]) == 0 ? 1 : 0;
+    wrong_kept += std::count(kept.begin(), kept.end(), pairs[1]);
+  }
+  // The test's quantile is 99.9 %: about 2 of 2000 true pairs are expected to fall outside.
+  EXPECT_LE(true_dropped, 10);
+  EXPECT_LE(wrong_kept, 20);
+  RecordProperty("true_pairs_dropped", true_dropped);
+  RecordProperty("wrong_pairs_kept", wrong_kept);
+}
+
 }  // namespace
 }  // namespace planeslam::registration

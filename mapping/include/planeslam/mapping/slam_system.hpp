@@ -330,6 +330,12 @@ class SlamSystem {
   Pose KeyframePose(std::int64_t id) const { return graph_.node(id).T_world_node(); }
   SlamFrameResult TrackFrame(double timestamp, const datasets::OrganizedCloud& cloud,
                              const detection::Segmentation& segmentation);
+  /// Registers `reg` again without its pairs that contradict the plausible motion
+  /// (registration::PlausibleMatches) when its result is suspect and other pairs agree.
+  void DropImplausibleMatches(const Keyframe& keyframe, const detection::Segmentation& segmentation,
+                              const registration::MotionPrior& prior,
+                              const registration::MotionPrior& gate_prior,
+                              registration::RegistrationResult* reg) const;
   void AddKeyframe(std::size_t frame, const Pose& T_world_sensor,
                    const detection::Segmentation& segmentation,
                    const datasets::OrganizedCloud& cloud,
