@@ -304,7 +304,8 @@ TEST(PlaneAssociation, PlausibleMatchesKeepTruePairsAndDropPairsOfOtherPlanes) {
     true_dropped += std::count(kept.begin(), kept.end(), pairs[0]) == 0 ? 1 : 0;
     wrong_kept += std::count(kept.begin(), kept.end(), pairs[1]);
   }
-  // The test's quantile is 99.9 %: about 2 of 2000 true pairs are expected to fall outside.
+  // About 0.3 % of true pairs (6 of 2000) would fall outside under an exact noise model; the
+  // motion's rotation about the normal adds variance the angle does not see, so fewer do.
   EXPECT_LE(true_dropped, 10);
   EXPECT_LE(wrong_kept, 20);
   RecordProperty("true_pairs_dropped", true_dropped);
