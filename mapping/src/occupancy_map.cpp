@@ -61,6 +61,10 @@ std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>&
     std::uint32_t begin, end;  ///< points[begin, end), all kept
   };
   std::vector<Run> runs;
+  // Axis a's 21-bit field of a packed key.
+  const auto field = [](std::uint64_t key, int a) {
+    return key >> (42 - 21 * a) & ((1u << 21) - 1);
+  };
   std::uint64_t lo[3] = {~std::uint64_t{0}, ~std::uint64_t{0}, ~std::uint64_t{0}}, hi[3] = {};
   for (std::size_t i = 0; i < points.size(); ++i) {
     const Eigen::Vector3f& p = points[i];
@@ -82,23 +86,21 @@ std::vector<Eigen::Vector3f> VoxelDownsample(const std::vector<Eigen::Vector3f>&
     } else {
       runs.push_back({voxel_key, index, index + 1});
       for (int a = 0; a < 3; ++a) {
-        const std::uint64_t field = voxel_key >> (42 - 21 * a) & ((1u << 21) - 1);
-        lo[a] = std::min(lo[a], field);
-        hi[a] = std::max(hi[a], field);
+        lo[a] = std::min(lo[a], field(voxel_key, a));
+        hi[a] = std::max(hi[a], field(voxel_key, a));
       }
     }
   }
+  if (runs.empty()) return {};
   // Repacked with as many bits per axis as the cloud's extent needs: fewer digits to sort by.
   int bits[3];
   for (int a = 0; a < 3; ++a) {
     bits[a] = 1;
-    while (runs.size() > 0 && (std::uint64_t{1} << bits[a]) <= hi[a] - lo[a]) ++bits[a];
+    while ((std::uint64_t{1} << bits[a]) <= hi[a] - lo[a]) ++bits[a];
   }
   for (Run& run : runs) {
     std::uint64_t packed = 0;
-    for (int a = 0; a < 3; ++a) {
-      packed = packed << bits[a] | ((run.voxel >> (42 - 21 * a) & ((1u << 21) - 1)) - lo[a]);
-    }
+    for (int a = 0; a < 3; ++a) packed = packed << bits[a] | (field(run.voxel, a) - lo[a]);
     run.voxel = packed;
   }
   // The runs sorted stably by voxel (radix, least significant digit first): a voxel's runs stay in

@@ -559,8 +559,9 @@ std::vector<PlaneMatch> PlausibleMatches(const std::vector<detection::Plane>& pr
     const Eigen::Matrix4d cov_c =
         config.covariance_scale * PlaneCovarianceOrFallback(c, config.fallback_point_sigma);
     const double sign = m.flip_curr ? -1.0 : 1.0;
-    const Eigen::Vector3d n = T.linear() * (sign * c.normal);
-    const double d = sign * c.d + n.dot(T.translation());
+    const PlaneParams moved = TransformPlane(T, sign * c.normal, sign * c.d);
+    const Eigen::Vector3d& n = moved.normal;
+    const double d = moved.d;
     const double angle = std::acos(std::clamp(n.dot(p.normal), -1.0, 1.0));
     // Per tangent axis: half the trace of a unit normal's (rank-2) covariance.
     const double angle_var =
