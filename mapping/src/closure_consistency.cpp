@@ -76,8 +76,11 @@ void GraphPaths::AddEdge(const PoseGraphEdge& edge) {
   const UncertainPose forward{edge.T_a_b(), SymmetricInverse(edge.information)};
   const UncertainPose backward = Invert(forward);
   const int from = Number(edge.from), to = Number(edge.to);
-  links_[from].push_back({to, forward.covariance, forward.covariance.trace()});
-  links_[to].push_back({from, backward.covariance, backward.covariance.trace()});
+  const int forward_index = static_cast<int>(covariances_.size());
+  covariances_.push_back(forward.covariance);
+  covariances_.push_back(backward.covariance);
+  links_[to].push_back({from, forward_index, forward.covariance.trace()});
+  links_[from].push_back({to, forward_index + 1, backward.covariance.trace()});
 }
 
 void GraphPaths::RemoveEdge(std::int64_t from, std::int64_t to) {
@@ -93,55 +96,79 @@ void GraphPaths::RemoveEdge(std::int64_t from, std::int64_t to) {
 }
 
 std::optional<UncertainPose> GraphPaths::Relative(std::int64_t from, std::int64_t to) {
-  if (from == to) return UncertainPose{};
-  const int source = Find(from), target = Find(to);
-  if (source < 0 || target < 0) return std::nullopt;  // a node without edges reaches nothing
-  // Dijkstra on the covariance trace; the path found is then composed with the current poses.
+  return RelativeFrom({from}, to).front();
+}
+
+void GraphPaths::SearchBack(int target, std::size_t wanted) {
+  reached_[target] = {search_, false, false, 0.0, -1, -1};
+  queue_.clear();
+  queue_.push_back({0.0, ids_[target], target});
+  const std::greater<Queued> later;
+  std::size_t settled = 0, found = 0;
+  while (!queue_.empty() && found < wanted && settled < max_nodes_) {
+    std::pop_heap(queue_.begin(), queue_.end(), later);
+    const Queued top = queue_.back();
+    queue_.pop_back();
+    Reached& r = reached_[top.node];
+    if (r.settled || top.distance > r.distance) continue;
+    r.settled = true;
+    found += r.wanted ? 1 : 0;
+    ++settled;
+    for (const Link& link : links_[top.node]) {
+      const double d = top.distance + link.weight;
+      Reached& other = reached_[link.to];
+      if (other.stamp != search_) {
+        other = {search_, false, false, d, top.node, link.covariance};
+      } else if (!other.settled && d < other.distance) {
+        other.distance = d;
+        other.next = top.node;
+        other.covariance = link.covariance;
+      } else {
+        continue;
+      }
+      queue_.push_back({d, ids_[link.to], link.to});
+      std::push_heap(queue_.begin(), queue_.end(), later);
+    }
+  }
+}
+
+std::vector<std::optional<UncertainPose>> GraphPaths::RelativeFrom(
+    const std::vector<std::int64_t>& sources, std::int64_t to) {
+  std::vector<std::optional<UncertainPose>> paths(sources.size());
+  const int target = Find(to);
   if (++search_ == 0) {  // the stamps wrapped around
     for (Reached& r : reached_) r.stamp = 0;
     search_ = 1;
   }
-  reached_[source] = {search_, 0.0, source, nullptr};
-  queue_.clear();
-  queue_.push_back({0.0, from, source});
-  const std::greater<Queued> later;
-  std::size_t settled = 0;
-  bool found = false;
-  while (!queue_.empty() && settled < max_nodes_) {
-    std::pop_heap(queue_.begin(), queue_.end(), later);
-    const Queued top = queue_.back();
-    queue_.pop_back();
-    if (top.distance > reached_[top.node].distance) continue;
-    if (top.node == target) {
-      found = true;
-      break;
+  // Dijkstra on the covariance trace, from the target back to every source (a node without
+  // edges reaches nothing); each path found is then composed with the current poses.
+  std::size_t wanted = 0;
+  for (const std::int64_t id : sources) {
+    const int source = id == to ? -1 : Find(id);
+    if (target < 0 || source < 0 || reached_[source].stamp == search_) continue;
+    reached_[source] = {search_, false, true, std::numeric_limits<double>::infinity(), -1, -1};
+    ++wanted;
+  }
+  if (wanted > 0) SearchBack(target, wanted);
+  for (std::size_t k = 0; k < sources.size(); ++k) {
+    if (sources[k] == to) {
+      paths[k] = UncertainPose{};
+      continue;
     }
-    ++settled;
-    for (const Link& link : links_[top.node]) {
-      const double d = top.distance + link.weight;
-      Reached& r = reached_[link.to];
-      if (r.stamp != search_ || d < r.distance) {
-        r = {search_, d, top.node, &link};
-        queue_.push_back({d, ids_[link.to], link.to});
-        std::push_heap(queue_.begin(), queue_.end(), later);
-      }
+    const int source = target < 0 ? -1 : Find(sources[k]);
+    if (source < 0 || !reached_[source].settled || reached_[source].stamp != search_) continue;
+    UncertainPose path;
+    for (int node = source; node != target; node = reached_[node].next) {
+      const int next = reached_[node].next;
+      UncertainPose step;
+      step.T = graph_.node(ids_[node]).T_world_node().inverse() *
+               graph_.node(ids_[next]).T_world_node();
+      step.covariance = covariances_[static_cast<std::size_t>(reached_[node].covariance)];
+      path = Compose(path, step);
     }
+    paths[k] = path;
   }
-  if (!found) return std::nullopt;
-  std::vector<std::pair<int, const Link*>> steps;  // (node the step starts at, link)
-  for (int node = target; node != source; node = reached_[node].previous) {
-    steps.emplace_back(reached_[node].previous, reached_[node].via);
-  }
-  std::reverse(steps.begin(), steps.end());
-  UncertainPose path;
-  for (const auto& [start, link] : steps) {
-    UncertainPose step;
-    step.T = graph_.node(ids_[start]).T_world_node().inverse() *
-             graph_.node(ids_[link->to]).T_world_node();
-    step.covariance = link->covariance;
-    path = Compose(path, step);
-  }
-  return path;
+  return paths;
 }
 
 namespace {

@@ -78,13 +78,17 @@ void SlamSystem::SearchLoopClosures(const Keyframe& current, SlamFrameResult* re
   // Every older keyframe is a possible candidate; the distance, read from the node's position,
   // rules out most of them before a pose is built. Keyframe i is the graph's node i, with id i
   // (AddKeyframe adds both), so the nodes are read in order rather than looked up by id.
+  // The angle between the viewing directions is that of the relative rotation, read from the
+  // quaternions' dot product.
   const std::vector<PoseGraphNode>& nodes = graph_.nodes();
   PLANESLAM_CHECK(nodes.size() == keyframes_.size(), "one pose graph node per keyframe");
+  const Eigen::Quaterniond q_current(T_world_current.linear());
   for (std::size_t i = 0; i < nodes.size(); ++i) {
     if (nodes[i].id > current.id - config_.loop_min_keyframe_gap) break;
     const double distance = (nodes[i].position - T_world_current.translation()).norm();
     if (!(distance < config_.loop_search_radius)) continue;
-    const double angle = RotationAngle(nodes[i].T_world_node().inverse() * T_world_current);
+    const double cos_half = std::abs(nodes[i].rotation.normalized().dot(q_current.normalized()));
+    const double angle = 2.0 * std::acos(std::min(1.0, cos_half));
     if (angle < config_.loop_max_angle_deg * kDegToRad) candidates.push_back({distance, i});
   }
   std::sort(candidates.begin(), candidates.end(), [](const Candidate& a, const Candidate& b) {
@@ -390,44 +394,67 @@ void SlamSystem::ProposeClosure(LoopClosureRecord record, SlamFrameResult* resul
   closures_.push_back(std::move(record));
 }
 
-bool SlamSystem::PairConsistent(std::size_t a, std::size_t b) {
-  if (a > b) std::swap(a, b);
-  const auto cached = pair_consistent_.find({a, b});
-  if (cached != pair_consistent_.end()) return cached->second;
-  const LoopClosureRecord& A = closures_[a];
-  const LoopClosureRecord& B = closures_[b];
-  const auto relative = [&](std::int64_t from, std::int64_t to) {
-    if (auto path = paths_->Relative(from, to)) return *path;
+void SlamSystem::TestNewPairs(const std::vector<std::size_t>& window) {
+  // Each hypothesis meets the older ones of the window it has not met yet; the chains between
+  // their keyframes come from one path search back from each of its two keyframes. Without a
+  // short chain, the drift the loop search assumes.
+  const auto chain = [&](const std::optional<UncertainPose>& path, std::int64_t from,
+                         std::int64_t to) {
+    if (path) return *path;
     return UncertainPose{KeyframePose(from).inverse() * KeyframePose(to),
                          DiagonalCovariance(config_.loop_prior_translation_sigma,
                                             config_.loop_prior_rotation_sigma)};
   };
-  // Cycle from A's old keyframe: A's closure, the chain between the new keyframes, B's closure
-  // backwards, the chain between the old keyframes backwards.
-  const UncertainPose cycle = Compose(Compose(Compose(UncertainPose{A.T_from_to, A.covariance},
-                                                      relative(A.to_keyframe, B.to_keyframe)),
-                                              Invert(UncertainPose{B.T_from_to, B.covariance})),
-                                      Invert(relative(A.from_keyframe, B.from_keyframe)));
-  const bool consistent = IdentityChi2(cycle) <= config_.loop_consistency_chi2;
-  pair_consistent_[{a, b}] = consistent;
-  return consistent;
+  for (const std::size_t b : window) {
+    std::vector<std::size_t> older;
+    for (const std::size_t a : window) {
+      if (a < b && pair_consistent_.find({a, b}) == pair_consistent_.end()) older.push_back(a);
+    }
+    if (older.empty()) continue;
+    const LoopClosureRecord& B = closures_[b];
+    std::vector<std::int64_t> new_keyframes, old_keyframes;
+    for (const std::size_t a : older) {
+      new_keyframes.push_back(closures_[a].to_keyframe);
+      old_keyframes.push_back(closures_[a].from_keyframe);
+    }
+    const auto new_chains = paths_->RelativeFrom(new_keyframes, B.to_keyframe);
+    const auto old_chains = paths_->RelativeFrom(old_keyframes, B.from_keyframe);
+    for (std::size_t k = 0; k < older.size(); ++k) {
+      const LoopClosureRecord& A = closures_[older[k]];
+      // Cycle from A's old keyframe: A's closure, the chain between the new keyframes, B's
+      // closure backwards, the chain between the old keyframes backwards.
+      const UncertainPose cycle =
+          Compose(Compose(Compose(UncertainPose{A.T_from_to, A.covariance},
+                                  chain(new_chains[k], A.to_keyframe, B.to_keyframe)),
+                          Invert(UncertainPose{B.T_from_to, B.covariance})),
+                  Invert(chain(old_chains[k], A.from_keyframe, B.from_keyframe)));
+      pair_consistent_[{older[k], b}] = IdentityChi2(cycle) <= config_.loop_consistency_chi2;
+    }
+  }
 }
 
 int SlamSystem::DecideClosures(std::int64_t current_id, SlamFrameResult* result) {
   if (pending_.empty()) return 0;
   const std::int64_t window_start = current_id - config_.loop_window_keyframes;
   // The window: the pending hypotheses and the closures accepted within it (support).
+  // Hypotheses are proposed as their new keyframe is added, so closures_ is ordered by it.
   std::vector<std::size_t> window;
-  for (const auto& [pair, index] : accepted_edges_) {
-    if (closures_[index].to_keyframe >= window_start) window.push_back(index);
+  for (std::size_t index = closures_.size(); index-- > 0;) {
+    const LoopClosureRecord& record = closures_[index];
+    if (record.to_keyframe < window_start) break;
+    if (record.status != ClosureStatus::kAccepted) continue;
+    const auto edge = accepted_edges_.find({record.from_keyframe, record.to_keyframe});
+    if (edge != accepted_edges_.end() && edge->second == index) window.push_back(index);
   }
-  std::sort(window.begin(), window.end());
+  std::reverse(window.begin(), window.end());
   window.insert(window.end(), pending_.begin(), pending_.end());
   const std::size_t n = window.size();
+  TestNewPairs(window);
   std::vector<std::vector<bool>> adjacent(n, std::vector<bool>(n, false));
   for (std::size_t i = 0; i < n; ++i) {
     for (std::size_t j = i + 1; j < n; ++j) {
-      adjacent[i][j] = adjacent[j][i] = PairConsistent(window[i], window[j]);
+      adjacent[i][j] = adjacent[j][i] =
+          pair_consistent_.at({std::min(window[i], window[j]), std::max(window[i], window[j])});
     }
   }
   const std::vector<int> clique = MaximumClique(adjacent);

@@ -1,10 +1,11 @@
 // Loop closures as hypotheses: the maximum clique (against brute force on random graphs), the
 // first-order propagation of Compose / Invert (against finite differences), the chi-square of a
-// cycle, and the graph's chain covariances.
+// cycle, and the graph's chain covariances (against every path of small random graphs).
 #include "planeslam/mapping/closure_consistency.hpp"
 
 #include <gtest/gtest.h>
 
+#include <functional>
 #include <random>
 
 #include "planeslam/registration/geometry.hpp"
@@ -126,6 +127,90 @@ TEST(ClosureConsistency, CycleChiSquareSeparatesTrueFromFalseClosures) {
   paths.RemoveEdge(0, 4);
   EXPECT_NEAR(paths.Relative(0, 4)->covariance.trace(), chain->covariance.trace(), 1e-12);
   EXPECT_FALSE(GraphPaths(graph, 2).Relative(0, 3).has_value());  // beyond the node budget
+}
+
+
+/// Random graphs of 9 nodes (one without edges) and random edge covariances: one backward search
+/// from a target answers every source with the chain of least summed covariance trace, found
+/// here by walking every simple path, and agrees with a search per source.
+TEST(ClosureConsistency, ChainsFromManySourcesAreTheLeastUncertainPaths) {
+  std::mt19937 rng(31);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  constexpr int kNodes = 9, kIsolated = 8;
+  for (int draw = 0; draw < 40; ++draw) {
+    PoseGraph graph;
+    for (int k = 0; k < kNodes; ++k) {
+      graph.AddNode(k, BoxPlus(Pose::Identity(), 3.0 * Vector6d::NullaryExpr([&] { return u(rng); })),
+                    k == 0);
+    }
+    for (int k = 1; k < kIsolated; ++k) {  // a chain keeps the graph connected
+      graph.AddEdge(k - 1, k, Pose::Identity(), Matrix6d::Identity(), EdgeKind::kOdometry);
+    }
+    for (int extra = 0; extra < 7; ++extra) {
+      const int a = static_cast<int>(rng() % kIsolated), b = static_cast<int>(rng() % kIsolated);
+      if (a != b) graph.AddEdge(a, b, Pose::Identity(), Matrix6d::Identity(), EdgeKind::kLoopClosure);
+    }
+    for (PoseGraphEdge& edge : graph.edges()) {  // random covariances, random step poses
+      const Matrix6d m = Matrix6d::NullaryExpr([&] { return u(rng); });
+      edge.information = (m * m.transpose() + 0.1 * Matrix6d::Identity()).inverse();
+      const Pose T = BoxPlus(Pose::Identity(), Vector6d::NullaryExpr([&] { return u(rng); }));
+      edge.translation = T.translation();
+      edge.rotation = Eigen::Quaterniond(T.linear());
+    }
+    GraphPaths paths(graph, 100);
+    // Every step of each edge in both directions, as the search weighs it.
+    std::vector<std::vector<std::pair<int, UncertainPose>>> steps(kNodes);
+    for (const PoseGraphEdge& edge : graph.edges()) {
+      const UncertainPose forward{edge.T_a_b(), edge.information.inverse()};
+      steps[edge.from].push_back({static_cast<int>(edge.to), forward});
+      steps[edge.to].push_back({static_cast<int>(edge.from), Invert(forward)});
+    }
+    const int target = static_cast<int>(rng() % kIsolated);
+    std::vector<std::int64_t> sources;
+    for (int k = 0; k < kNodes; ++k) sources.push_back(k);
+    sources.push_back(sources[1]);  // a source twice
+    const auto found = paths.RelativeFrom(sources, target);
+    ASSERT_EQ(found.size(), sources.size());
+    for (std::size_t k = 0; k < sources.size(); ++k) {
+      const int source = static_cast<int>(sources[k]);
+      const auto single = paths.Relative(source, target);
+      if (source == kIsolated) {
+        EXPECT_FALSE(found[k].has_value());
+        EXPECT_FALSE(single.has_value());
+        continue;
+      }
+      ASSERT_TRUE(found[k].has_value() && single.has_value());
+      EXPECT_LT((found[k]->covariance - single->covariance).norm(), 1e-12);
+      // The least uncertain chain by walking every simple path.
+      double best = std::numeric_limits<double>::infinity();
+      UncertainPose best_chain;
+      std::vector<bool> visited(kNodes, false);
+      const std::function<void(int, double, const UncertainPose&)> walk =
+          [&](int node, double weight, const UncertainPose& chain) {
+            if (node == target) {
+              if (weight < best) best = weight, best_chain = chain;
+              return;
+            }
+            visited[node] = true;
+            for (const auto& [next, step] : steps[node]) {
+              if (visited[next]) continue;
+              // The means of a chain come from the node poses, the covariances from the edges.
+              const UncertainPose placed{graph.node(node).T_world_node().inverse() *
+                                             graph.node(next).T_world_node(),
+                                         step.covariance};
+              walk(next, weight + step.covariance.trace(), Compose(chain, placed));
+            }
+            visited[node] = false;
+          };
+      walk(source, 0.0, UncertainPose{});
+      const Pose T_expected = graph.node(source).T_world_node().inverse() *
+                              graph.node(target).T_world_node();
+      EXPECT_LT(BoxMinus(found[k]->T, T_expected).norm(), 1e-9);
+      EXPECT_LE((found[k]->covariance - best_chain.covariance).norm(),
+                1e-9 * best_chain.covariance.norm())
+          << "draw " << draw << " source " << source << " target " << target;
+    }
+  }
 }
 
 }  // namespace

@@ -40,8 +40,10 @@ double IdentityChi2(const UncertainPose& x);
 /// Relative poses between graph nodes with the uncertainty of the best-determined chain of edges
 /// between them: the means come from the graph's current node poses, the covariance from the
 /// edges (odometry and accepted closures) along the path that minimises the summed covariance
-/// trace (Dijkstra). A search stops after `max_nodes` settled nodes; nodes it does not reach get
-/// no answer (the caller uses its own bound, e.g. the loop search's drift prior).
+/// trace (Dijkstra). The search runs backwards from the target, so one search answers many
+/// sources; it stops when every source is settled or after `max_nodes` settled nodes, and
+/// sources it does not reach get no answer (the caller uses its own bound, e.g. the loop search's
+/// drift prior).
 class GraphPaths {
  public:
   /// Paths over the edges of `graph` (which must outlive this); edges added to or removed from
@@ -52,13 +54,18 @@ class GraphPaths {
   void RemoveEdge(std::int64_t from, std::int64_t to);
   /// T_from_to and its covariance, or nothing when `to` is not reached from `from`.
   std::optional<UncertainPose> Relative(std::int64_t from, std::int64_t to);
+  /// T_source_to for each of `sources`, in their order, from one search.
+  std::vector<std::optional<UncertainPose>> RelativeFrom(const std::vector<std::int64_t>& sources,
+                                                         std::int64_t to);
 
  private:
   /// The nodes are numbered densely in the order they first appear, so a search runs on arrays.
+  /// A link of node u to node v is one direction of an edge; the search walks it backwards,
+  /// from v to u, weighed by the covariance of the step from u to v.
   struct Link {
-    int to;               ///< dense number of the node
-    Matrix6d covariance;  ///< of T_from_to, in `from`
-    double weight;        ///< trace of the covariance
+    int to;          ///< dense number of the other node
+    int covariance;  ///< index in covariances_ of T_other_this's covariance (in `other`)
+    double weight;   ///< trace of that covariance
   };
   struct Queued {
     double distance;
@@ -70,19 +77,25 @@ class GraphPaths {
   };
   int Number(std::int64_t id);      ///< the node's dense number, added when new
   int Find(std::int64_t id) const;  ///< or -1
+  /// Settles nodes backwards from `target` until the `wanted` nodes flagged in reached_ are
+  /// settled or the budget is spent.
+  void SearchBack(int target, std::size_t wanted);
 
   const PoseGraph& graph_;
   std::size_t max_nodes_;
   std::unordered_map<std::int64_t, int> number_;
   std::vector<std::int64_t> ids_;
   std::vector<std::vector<Link>> links_;
+  std::vector<Matrix6d> covariances_;  ///< of every link's step, both directions of each edge
   /// One search's state of a node, valid while its stamp is the search's (nothing is cleared
   /// between searches).
   struct Reached {
     std::uint32_t stamp = 0;
+    bool settled = false;
+    bool wanted = false;  ///< a source of the search
     double distance = 0.0;
-    int previous = -1;
-    const Link* via = nullptr;
+    int next = -1;        ///< the node after this one on the path to the target
+    int covariance = -1;  ///< of the step from this node to `next`
   };
   std::vector<Reached> reached_;
   std::vector<Queued> queue_;

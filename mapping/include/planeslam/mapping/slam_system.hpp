@@ -370,7 +370,8 @@ class SlamSystem {
   void ProposeClosure(LoopClosureRecord record, SlamFrameResult* result);
   /// PCM decision over the window; adds the accepted closures' edges. Returns how many.
   int DecideClosures(std::int64_t current_id, SlamFrameResult* result);
-  bool PairConsistent(std::size_t a, std::size_t b);
+  /// PCM: tests the pairs of hypotheses of `window` not tested yet (pair_consistent_).
+  void TestNewPairs(const std::vector<std::size_t>& window);
   /// Optimises after closures were accepted (window or whole graph), then retracts outliers.
   void OptimizeAfterClosures(int accepted, SlamFrameResult* result);
   /// Removes accepted closures whose residual exceeds loop_consistency_chi2. Returns how many.
