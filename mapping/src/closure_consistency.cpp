@@ -161,8 +161,8 @@ std::vector<std::optional<UncertainPose>> GraphPaths::RelativeFrom(
     for (int node = source; node != target; node = reached_[node].next) {
       const int next = reached_[node].next;
       UncertainPose step;
-      step.T = graph_.node(ids_[node]).T_world_node().inverse() *
-               graph_.node(ids_[next]).T_world_node();
+      step.T =
+          graph_.node(ids_[node]).T_world_node().inverse() * graph_.node(ids_[next]).T_world_node();
       step.covariance = covariances_[static_cast<std::size_t>(reached_[node].covariance)];
       path = Compose(path, step);
     }

@@ -129,7 +129,6 @@ TEST(ClosureConsistency, CycleChiSquareSeparatesTrueFromFalseClosures) {
   EXPECT_FALSE(GraphPaths(graph, 2).Relative(0, 3).has_value());  // beyond the node budget
 }
 
-
 /// Random graphs of 9 nodes (one without edges) and random edge covariances: one backward search
 /// from a target answers every source with the chain of least summed covariance trace, found
 /// here by walking every simple path, and agrees with a search per source.
@@ -140,7 +139,8 @@ TEST(ClosureConsistency, ChainsFromManySourcesAreTheLeastUncertainPaths) {
   for (int draw = 0; draw < 40; ++draw) {
     PoseGraph graph;
     for (int k = 0; k < kNodes; ++k) {
-      graph.AddNode(k, BoxPlus(Pose::Identity(), 3.0 * Vector6d::NullaryExpr([&] { return u(rng); })),
+      graph.AddNode(k,
+                    BoxPlus(Pose::Identity(), 3.0 * Vector6d::NullaryExpr([&] { return u(rng); })),
                     k == 0);
     }
     for (int k = 1; k < kIsolated; ++k) {  // a chain keeps the graph connected
@@ -148,7 +148,8 @@ TEST(ClosureConsistency, ChainsFromManySourcesAreTheLeastUncertainPaths) {
     }
     for (int extra = 0; extra < 7; ++extra) {
       const int a = static_cast<int>(rng() % kIsolated), b = static_cast<int>(rng() % kIsolated);
-      if (a != b) graph.AddEdge(a, b, Pose::Identity(), Matrix6d::Identity(), EdgeKind::kLoopClosure);
+      if (a == b) continue;
+      graph.AddEdge(a, b, Pose::Identity(), Matrix6d::Identity(), EdgeKind::kLoopClosure);
     }
     for (PoseGraphEdge& edge : graph.edges()) {  // random covariances, random step poses
       const Matrix6d m = Matrix6d::NullaryExpr([&] { return u(rng); });
@@ -188,23 +189,26 @@ TEST(ClosureConsistency, ChainsFromManySourcesAreTheLeastUncertainPaths) {
       const std::function<void(int, double, const UncertainPose&)> walk =
           [&](int node, double weight, const UncertainPose& chain) {
             if (node == target) {
-              if (weight < best) best = weight, best_chain = chain;
+              if (weight < best) {
+                best = weight;
+                best_chain = chain;
+              }
               return;
             }
             visited[node] = true;
             for (const auto& [next, step] : steps[node]) {
               if (visited[next]) continue;
               // The means of a chain come from the node poses, the covariances from the edges.
-              const UncertainPose placed{graph.node(node).T_world_node().inverse() *
-                                             graph.node(next).T_world_node(),
-                                         step.covariance};
+              const UncertainPose placed{
+                  graph.node(node).T_world_node().inverse() * graph.node(next).T_world_node(),
+                  step.covariance};
               walk(next, weight + step.covariance.trace(), Compose(chain, placed));
             }
             visited[node] = false;
           };
       walk(source, 0.0, UncertainPose{});
-      const Pose T_expected = graph.node(source).T_world_node().inverse() *
-                              graph.node(target).T_world_node();
+      const Pose T_expected =
+          graph.node(source).T_world_node().inverse() * graph.node(target).T_world_node();
       EXPECT_LT(BoxMinus(found[k]->T, T_expected).norm(), 1e-9);
       EXPECT_LE((found[k]->covariance - best_chain.covariance).norm(),
                 1e-9 * best_chain.covariance.norm())
