@@ -76,10 +76,9 @@ void SlamSystem::SearchLoopClosures(const Keyframe& current, SlamFrameResult* re
   };
   std::vector<Candidate> candidates;
   // Every older keyframe is a possible candidate; the distance, read from the node's position,
-  // rules out most of them before a pose is built. Keyframe i is the graph's node i, with id i
-  // (AddKeyframe adds both), so the nodes are read in order rather than looked up by id.
-  // The angle between the viewing directions is that of the relative rotation, read from the
-  // quaternions' dot product.
+  // rules out most of them, and the angle between the viewing directions (of the relative
+  // rotation, from the quaternions' dot product) more. Keyframe i is the graph's node i, with id
+  // i (AddKeyframe adds both), so the nodes are read in order rather than looked up by id.
   const std::vector<PoseGraphNode>& nodes = graph_.nodes();
   PLANESLAM_CHECK(nodes.size() == keyframes_.size(), "one pose graph node per keyframe");
   const Eigen::Quaterniond q_current(T_world_current.linear());
