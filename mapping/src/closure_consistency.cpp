@@ -142,10 +142,12 @@ std::vector<std::optional<UncertainPose>> GraphPaths::RelativeFrom(
   }
   // Dijkstra on the covariance trace, from the target back to every source (a node without
   // edges reaches nothing); each path found is then composed with the current poses.
+  std::vector<int> numbers(sources.size(), -1);  // -1: the target itself, or unreachable
   std::size_t wanted = 0;
-  for (const std::int64_t id : sources) {
-    const int source = id == to ? -1 : Find(id);
-    if (target < 0 || source < 0 || reached_[source].stamp == search_) continue;
+  for (std::size_t k = 0; k < sources.size(); ++k) {
+    numbers[k] = sources[k] == to || target < 0 ? -1 : Find(sources[k]);
+    const int source = numbers[k];
+    if (source < 0 || reached_[source].stamp == search_) continue;
     reached_[source] = {search_, false, true, std::numeric_limits<double>::infinity(), -1, -1};
     ++wanted;
   }
@@ -155,8 +157,8 @@ std::vector<std::optional<UncertainPose>> GraphPaths::RelativeFrom(
       paths[k] = UncertainPose{};
       continue;
     }
-    const int source = target < 0 ? -1 : Find(sources[k]);
-    if (source < 0 || !reached_[source].settled || reached_[source].stamp != search_) continue;
+    const int source = numbers[k];
+    if (source < 0 || !reached_[source].settled) continue;
     UncertainPose path;
     for (int node = source; node != target; node = reached_[node].next) {
       const int next = reached_[node].next;

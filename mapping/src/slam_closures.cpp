@@ -81,12 +81,12 @@ void SlamSystem::SearchLoopClosures(const Keyframe& current, SlamFrameResult* re
   // i (AddKeyframe adds both), so the nodes are read in order rather than looked up by id.
   const std::vector<PoseGraphNode>& nodes = graph_.nodes();
   PLANESLAM_CHECK(nodes.size() == keyframes_.size(), "one pose graph node per keyframe");
-  const Eigen::Quaterniond q_current(T_world_current.linear());
+  const Eigen::Quaterniond q_current = Eigen::Quaterniond(T_world_current.linear()).normalized();
   for (std::size_t i = 0; i < nodes.size(); ++i) {
     if (nodes[i].id > current.id - config_.loop_min_keyframe_gap) break;
     const double distance = (nodes[i].position - T_world_current.translation()).norm();
     if (!(distance < config_.loop_search_radius)) continue;
-    const double cos_half = std::abs(nodes[i].rotation.normalized().dot(q_current.normalized()));
+    const double cos_half = std::abs(nodes[i].rotation.normalized().dot(q_current));
     const double angle = 2.0 * std::acos(std::min(1.0, cos_half));
     if (angle < config_.loop_max_angle_deg * kDegToRad) candidates.push_back({distance, i});
   }
