@@ -470,6 +470,9 @@ const LocalVoxelMap::MapPoint* LocalVoxelMap::NearestWithin(const Eigen::Vector3
 
 namespace {
 
+/// Each source point's map point (null: none within reach), from the last search.
+using MapPairs = std::vector<const LocalVoxelMap::MapPoint*>;
+
 /// The Gauss-Newton sums of one iteration at T_prev_curr.
 struct PairSums {
   Eigen::MatrixXd H;
@@ -483,7 +486,8 @@ struct PairSums {
 template <int K>
 PairSums AccumulatePairsOf(const LocalVoxelMap& map, const Pose& T_world_prev,
                            const std::vector<ShapedPoint>& source, const Pose& T,
-                           const Eigen::MatrixXd& D, const std::vector<char>& is_translation) {
+                           const Eigen::MatrixXd& D, const std::vector<char>& is_translation,
+                           MapPairs& pairs, bool associate) {
   // At most six directions: fixed-capacity matrices keep the loop free of heap allocations.
   using MatK = Eigen::Matrix<double, K, K, 0, 6, 6>;
   using Mat3K = Eigen::Matrix<double, 3, K, 0, 3, 6>;
@@ -503,11 +507,15 @@ PairSums AccumulatePairsOf(const LocalVoxelMap& map, const Pose& T_world_prev,
   const Mat3K D_r = D.bottomRows<3>();
   Mat3K J(3, k), MJ(3, k);
   const Eigen::Matrix3d R_wc = T_world_curr.linear();
-  for (const ShapedPoint& point : source) {
+  if (associate) pairs.assign(source.size(), nullptr);
+  for (std::size_t i = 0; i < source.size(); ++i) {
+    const ShapedPoint& point = source[i];
     const Eigen::Vector3d& p = point.position;
     const Eigen::Vector3d q = T_world_curr * p;
-    const LocalVoxelMap::MapPoint* m =
-        map.NearestWithin(q, R_wc * point.shape * R_wc.transpose(), max_distance2);
+    if (associate) {
+      pairs[i] = map.NearestWithin(q, R_wc * point.shape * R_wc.transpose(), max_distance2);
+    }
+    const LocalVoxelMap::MapPoint* m = pairs[i];
     if (m == nullptr) continue;
     const Eigen::Vector3d r = q - m->position;
     const Eigen::Matrix3d& M = m->shape;
@@ -538,9 +546,20 @@ PairSums AccumulatePairsOf(const LocalVoxelMap& map, const Pose& T_world_prev,
 /// the local map) with fixed-size matrices.
 PairSums AccumulatePairs(const LocalVoxelMap& map, const Pose& T_world_prev,
                          const std::vector<ShapedPoint>& source, const Pose& T,
-                         const Eigen::MatrixXd& D, const std::vector<char>& is_translation) {
-  if (D.cols() == 6) return AccumulatePairsOf<6>(map, T_world_prev, source, T, D, is_translation);
-  return AccumulatePairsOf<Eigen::Dynamic>(map, T_world_prev, source, T, D, is_translation);
+                         const Eigen::MatrixXd& D, const std::vector<char>& is_translation,
+                         MapPairs& pairs, bool associate) {
+  if (D.cols() == 6) {
+    return AccumulatePairsOf<6>(map, T_world_prev, source, T, D, is_translation, pairs, associate);
+  }
+  return AccumulatePairsOf<Eigen::Dynamic>(map, T_world_prev, source, T, D, is_translation, pairs,
+                                           associate);
+}
+
+/// The farthest a source point within `reach` of the sensor moves between poses a and b of the
+/// current frame: at most |t_b - t_a| + angle(R_a^T R_b) reach.
+double LargestShift(const Pose& a, const Pose& b, double reach) {
+  const Pose d = a.inverse() * b;
+  return d.translation().norm() + Eigen::AngleAxisd(d.linear()).angle() * reach;
 }
 
 }  // namespace
@@ -562,10 +581,21 @@ MapAlignmentResult AlignToLocalMap(const LocalVoxelMap& map, const Pose& T_world
   // Floor of the residual sigma: neighbouring pairs are correlated, so the information from
   // their count is optimistic; a tenth of a voxel keeps it in check.
   const double sigma_floor2 = std::pow(0.1 * map.voxel_size(), 2);
+  // The pairs are searched again only once the points have moved by more than 3 % of a voxel
+  // since the last search: the map is thinned to half a voxel, so a nearest neighbour hardly
+  // changes below that, and the later Gauss-Newton steps are far smaller.
+  double reach2 = 0.0;
+  for (const ShapedPoint& p : source) reach2 = std::max(reach2, p.position.squaredNorm());
+  const double reach = std::sqrt(reach2), research = 0.03 * map.voxel_size();
+  MapPairs pairs;
+  Pose T_searched = T_init;
   Eigen::VectorXd y = Eigen::VectorXd::Zero(k);
   for (int it = 0; it < config.max_iterations; ++it) {
+    const Pose T = BoxPlus(T_init, D * y);
+    const bool search = it == 0 || LargestShift(T_searched, T, reach) > research;
+    if (search) T_searched = T;
     const PairSums s =
-        AccumulatePairs(map, T_world_prev, source, BoxPlus(T_init, D * y), D, is_translation);
+        AccumulatePairs(map, T_world_prev, source, T, D, is_translation, pairs, search);
     res.iterations = it + 1;
     if (s.count < std::max(config.min_support, 6)) return res;  // valid stays false
     res.correspondences = s.count;

@@ -104,6 +104,51 @@ TEST(LocalMap, RecoversCorridorAxisFromClutterOverRandomDraws) {
   EXPECT_LE(failures, 1) << "of " << draws << " draws";  // budget: one draw in twenty
 }
 
+// The alignment searches its pairs again as the pose moves (beyond 3 % of a voxel): started a
+// voxel and a degree off, it reaches the true motion; with the pairs of its first search alone,
+// three of these ten draws end millimetres to centimetres off.
+TEST(LocalMap, AlignmentConvergesFromAnOffsetBeyondOnePairSearch) {
+  std::mt19937 rng(35);
+  const datasets::PinholeIntrinsics k = SmallCamera();
+  std::uniform_real_distribution<double> small(-1, 1);
+  int failures = 0;
+  const int draws = 10;
+  for (int draw = 0; draw < draws; ++draw) {
+    test::CorridorScene scene = MakeCorridor(false);
+    AddClutter(6, rng, &scene.scene);
+    Pose T_world_prev = Pose::Identity();
+    T_world_prev.linear() = LookAlongX();
+    Pose T_prev_curr = Pose::Identity();
+    T_prev_curr.linear() = ExpSO3(0.01 * Eigen::Vector3d(small(rng), small(rng), small(rng)));
+    T_prev_curr.translation() << 0.05 * small(rng), 0.05 * small(rng), 0.2;
+    const datasets::OrganizedCloud prev = RayCast(scene, k, T_world_prev, 0.002, rng);
+    const datasets::OrganizedCloud curr = RayCast(scene, k, T_world_prev * T_prev_curr, 0.002, rng);
+
+    LocalMapConfig config;
+    const double voxel = ScanReach(prev) / 100.0;
+    LocalVoxelMap map(voxel, config.max_points_per_voxel);
+    map.Insert(ShapePoints(VoxelDownsample(StructurePoints(prev, nullptr), 0.5 * voxel), voxel),
+               T_world_prev, ScanReach(prev));
+    const auto source =
+        ShapePoints(VoxelDownsample(StructurePoints(curr, nullptr), 0.5 * voxel), voxel);
+    Pose T_init = T_prev_curr;
+    T_init.translation() +=
+        1.0 * voxel * Eigen::Vector3d(small(rng), small(rng), small(rng)).normalized();
+    T_init.linear() =
+        T_init.linear() *
+        ExpSO3(0.0175 * Eigen::Vector3d(small(rng), small(rng), small(rng)).normalized());
+    const Matrix6d weak = (Vector6d() << 1.0, 1.0, 1.0, 0.25, 0.25, 0.25).finished().asDiagonal();
+    const MapAlignmentResult a =
+        AlignToLocalMap(map, T_world_prev, source, T_init, Matrix6d::Identity(), weak, config);
+    const Pose error = T_prev_curr.inverse() * a.T_prev_curr;
+    if (!a.valid || error.translation().norm() > 0.003 ||
+        Eigen::AngleAxisd(error.linear()).angle() > 0.1 * M_PI / 180.0) {
+      ++failures;
+    }
+  }
+  EXPECT_LE(failures, 1) << "of " << draws << " draws";  // budget: one draw in ten
+}
+
 // A second, independent scene: a rotating scanner (spherical range image) beside a single wall
 // over the ground, random boxes on the ground and against the wall. Ground and wall leave the
 // motion along the wall open; the boxes' points (the scanner's labels say which pixels are the
