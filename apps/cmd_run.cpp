@@ -219,7 +219,8 @@ class RunCommand : public Command {
   }
 
   int Run() override {
-    Config config = LoadConfigWithProfile(options_, sensor_, sequence_, "run");
+    Config config = sequence_.empty() ? LoadConfigForScene(options_, sensor_, scene_, "run")
+                                      : LoadConfigWithProfile(options_, sensor_, sequence_, "run");
     if (threads_) config.Get<RunConfig>("run").threads = *threads_;
     if (MaybePrintConfig(options_, config)) return 0;
     if (no_report_) config.Get<ReportConfig>("report").enabled = false;

@@ -9,6 +9,7 @@
 #include <iostream>
 #include <optional>
 
+#include "config_sections_synthetic.hpp"
 #include "planeslam/datasets/errors.hpp"
 #include "planeslam/datasets/image_io.hpp"
 #include "planeslam/datasets/pcd_io.hpp"
@@ -287,6 +288,24 @@ Config LoadConfigWithProfile(const ConfigOptions& options, const std::string& se
   for (const auto& file : options.config_files) config.LoadFile(file);
   for (const auto& assignment : options.overrides) config.Set(assignment);
   return config;
+}
+
+Config LoadConfigForScene(const ConfigOptions& options, const std::string& sensor,
+                          const std::string& scene, const std::string& command) {
+  if (!sensor.empty()) return LoadConfigWithProfile(options, sensor, "", command);
+  Config config = LoadConfigWithProfile(options, "", "", command);
+  const SimulationConfig& sim = config.Get<SimulationConfig>("simulation");
+  const std::string name = scene.empty() ? sim.scene : scene;
+  const std::string simulated =
+      sim.sensor == "auto" ? (name == "street" ? "lidar" : "pinhole") : sim.sensor;
+  if (simulated != "lidar") return config;
+  // The profile first, then the user's -c files and --set on top, as for a sequence folder.
+  Config profiled;
+  ApplyProfile({FindProfile("kitti"), "built-in scene " + name + ", simulated LiDAR"}, command,
+               &profiled);
+  for (const auto& file : options.config_files) profiled.LoadFile(file);
+  for (const auto& assignment : options.overrides) profiled.Set(assignment);
+  return profiled;
 }
 
 std::string ResolveDepthCamera(const std::string& png, const std::string& intrinsics_option,

@@ -53,6 +53,13 @@ Config LoadConfigWithProfile(const ConfigOptions& options, const std::string& se
                              const std::string& input, const std::string& command,
                              ProfileChoice* chosen = nullptr);
 
+/// LoadConfigWithProfile for `planeslam run` without a sequence: the built-in scene (`scene`, or
+/// the config's simulation.scene) gets the profile its `planeslam simulate` output would get when
+/// its simulated sensor is a LiDAR (the kitti profile); a depth-camera scene keeps the defaults,
+/// which are tuned on it. --sensor still decides when given.
+Config LoadConfigForScene(const ConfigOptions& options, const std::string& sensor,
+                          const std::string& scene, const std::string& command);
+
 /// The camera a single depth PNG is read with, in this order: the --intrinsics file; an
 /// intrinsics.yaml beside the image; the profile chosen for it (its dataset folder's
 /// intrinsics.yaml when the folder has one, else the profile's sensor section); a sensor section

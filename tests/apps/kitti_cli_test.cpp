@@ -64,6 +64,35 @@ TEST(KittiCli, SimulatedStreetRunsWithoutConfigAndSkipsABadScan) {
 
 /// Reference: 401 poses 1 m apart on a line; estimate: 1.5 % longer steps. Every segment's error
 /// is 0.015 (L + 1) / L (the devkit's last frame lies one step beyond L).
+/// `planeslam run --scene street` (no folder) gets the profile its `simulate` output would get, so
+/// the built-in LiDAR scene runs as configured; --sensor none and the depth-camera scenes keep
+/// the defaults.
+TEST(KittiCli, BuiltInStreetGetsTheLidarProfile) {
+  const fs::path dir = ScratchDir();
+  const std::string common =
+      " -q --no-report --set octomap.enabled=false --set simulation.frames=3";
+  const CliResult street =
+      RunCli("run --scene street" + common + " --out " + (dir / "street").string(), dir);
+  ASSERT_EQ(street.exit_code, app::kExitSuccess) << street.err;
+  EXPECT_TRUE(Contains(street.err, "built-in scene street, simulated LiDAR")) << street.err;
+  EXPECT_TRUE(Contains(street.err, "--sensor kitti")) << street.err;
+  const std::string effective = Slurp(dir / "street" / "config.yaml");
+  EXPECT_TRUE(Contains(effective, "plane_landmarks: false")) << effective;
+  EXPECT_TRUE(Contains(effective, "keyframe_translation: 1 ")) << effective;
+
+  const CliResult none = RunCli(
+      "run --scene street --sensor none" + common + " --out " + (dir / "none").string(), dir);
+  ASSERT_EQ(none.exit_code, app::kExitSuccess) << none.err;
+  EXPECT_TRUE(Contains(none.err, "no sensor profile (--sensor none)")) << none.err;
+  EXPECT_TRUE(Contains(Slurp(dir / "none" / "config.yaml"), "plane_landmarks: true"));
+
+  const CliResult room =
+      RunCli("run --scene room" + common + " --out " + (dir / "room").string(), dir);
+  ASSERT_EQ(room.exit_code, app::kExitSuccess) << room.err;
+  EXPECT_FALSE(Contains(room.err, "--sensor")) << room.err;
+  EXPECT_TRUE(Contains(Slurp(dir / "room" / "config.yaml"), "plane_landmarks: true"));
+}
+
 TEST(KittiCli, EvalKittiPrintsDevkitSegmentErrors) {
   const fs::path dir = ScratchDir();
   std::string ref, est, tum;
