@@ -42,6 +42,21 @@ void AddClutter(int boxes, std::mt19937& rng, datasets::SyntheticScene* scene) {
   }
 }
 
+/// The previous scan's structure as the local map (at T_world_prev) and the current scan's as
+/// the alignment's source, both thinned to half a voxel of a hundredth of the previous reach.
+struct ScanPair {
+  ScanPair(const datasets::OrganizedCloud& prev, const datasets::OrganizedCloud& curr,
+           const Pose& T_world_prev)
+      : voxel(ScanReach(prev) / 100.0), map(voxel, LocalMapConfig().max_points_per_voxel) {
+    map.Insert(ShapePoints(VoxelDownsample(StructurePoints(prev, nullptr), 0.5 * voxel), voxel),
+               T_world_prev, ScanReach(prev));
+    source = ShapePoints(VoxelDownsample(StructurePoints(curr, nullptr), 0.5 * voxel), voxel);
+  }
+  double voxel;
+  LocalVoxelMap map;
+  std::vector<ShapedPoint> source;
+};
+
 /// Planes of the corridor registered between two views: the axis is left open.
 RegistrationResult CorridorRegistration(const test::CorridorScene& scene, const Pose& T_world_prev,
                                         const Pose& T_world_curr, const MotionPrior& prior) {
@@ -82,12 +97,10 @@ TEST(LocalMap, RecoversCorridorAxisFromClutterOverRandomDraws) {
     ASSERT_TRUE(reg.degenerate);
 
     LocalMapConfig config;
-    const double voxel = ScanReach(prev) / 100.0;
-    LocalVoxelMap map(voxel, config.max_points_per_voxel);
-    map.Insert(ShapePoints(VoxelDownsample(StructurePoints(prev, nullptr), 0.5 * voxel), voxel),
-               T_world_prev, ScanReach(prev));
-    const auto source =
-        ShapePoints(VoxelDownsample(StructurePoints(curr, nullptr), 0.5 * voxel), voxel);
+    const ScanPair pair(prev, curr, T_world_prev);
+    const double voxel = pair.voxel;
+    const LocalVoxelMap& map = pair.map;
+    const std::vector<ShapedPoint>& source = pair.source;
     const bool used = FillDegenerateFromLocalMap(map, T_world_prev, source, config, &reg);
     const double error =
         (reg.T_prev_curr.translation() - T_prev_curr.translation()).dot(axis);
@@ -125,12 +138,10 @@ TEST(LocalMap, AlignmentConvergesFromAnOffsetBeyondOnePairSearch) {
     const datasets::OrganizedCloud curr = RayCast(scene, k, T_world_prev * T_prev_curr, 0.002, rng);
 
     LocalMapConfig config;
-    const double voxel = ScanReach(prev) / 100.0;
-    LocalVoxelMap map(voxel, config.max_points_per_voxel);
-    map.Insert(ShapePoints(VoxelDownsample(StructurePoints(prev, nullptr), 0.5 * voxel), voxel),
-               T_world_prev, ScanReach(prev));
-    const auto source =
-        ShapePoints(VoxelDownsample(StructurePoints(curr, nullptr), 0.5 * voxel), voxel);
+    const ScanPair pair(prev, curr, T_world_prev);
+    const double voxel = pair.voxel;
+    const LocalVoxelMap& map = pair.map;
+    const std::vector<ShapedPoint>& source = pair.source;
     Pose T_init = T_prev_curr;
     T_init.translation() +=
         1.0 * voxel * Eigen::Vector3d(small(rng), small(rng), small(rng)).normalized();
