@@ -487,7 +487,7 @@ template <int K>
 PairSums AccumulatePairsOf(const LocalVoxelMap& map, const Pose& T_world_prev,
                            const std::vector<ShapedPoint>& source, const Pose& T,
                            const Eigen::MatrixXd& D, const std::vector<char>& is_translation,
-                           MapPairs& pairs, bool associate) {
+                           MapPairs& pairs, bool search) {
   // At most six directions: fixed-capacity matrices keep the loop free of heap allocations.
   using MatK = Eigen::Matrix<double, K, K, 0, 6, 6>;
   using Mat3K = Eigen::Matrix<double, 3, K, 0, 3, 6>;
@@ -507,12 +507,12 @@ PairSums AccumulatePairsOf(const LocalVoxelMap& map, const Pose& T_world_prev,
   const Mat3K D_r = D.bottomRows<3>();
   Mat3K J(3, k), MJ(3, k);
   const Eigen::Matrix3d R_wc = T_world_curr.linear();
-  if (associate) pairs.assign(source.size(), nullptr);
+  if (search) pairs.assign(source.size(), nullptr);
   for (std::size_t i = 0; i < source.size(); ++i) {
     const ShapedPoint& point = source[i];
     const Eigen::Vector3d& p = point.position;
     const Eigen::Vector3d q = T_world_curr * p;
-    if (associate) {
+    if (search) {
       pairs[i] = map.NearestWithin(q, R_wc * point.shape * R_wc.transpose(), max_distance2);
     }
     const LocalVoxelMap::MapPoint* m = pairs[i];
@@ -547,12 +547,12 @@ PairSums AccumulatePairsOf(const LocalVoxelMap& map, const Pose& T_world_prev,
 PairSums AccumulatePairs(const LocalVoxelMap& map, const Pose& T_world_prev,
                          const std::vector<ShapedPoint>& source, const Pose& T,
                          const Eigen::MatrixXd& D, const std::vector<char>& is_translation,
-                         MapPairs& pairs, bool associate) {
+                         MapPairs& pairs, bool search) {
   if (D.cols() == 6) {
-    return AccumulatePairsOf<6>(map, T_world_prev, source, T, D, is_translation, pairs, associate);
+    return AccumulatePairsOf<6>(map, T_world_prev, source, T, D, is_translation, pairs, search);
   }
   return AccumulatePairsOf<Eigen::Dynamic>(map, T_world_prev, source, T, D, is_translation, pairs,
-                                           associate);
+                                           search);
 }
 
 /// The farthest a source point within `reach` of the sensor moves between poses a and b of the
@@ -586,13 +586,13 @@ MapAlignmentResult AlignToLocalMap(const LocalVoxelMap& map, const Pose& T_world
   // changes below that, and the later Gauss-Newton steps are far smaller.
   double reach2 = 0.0;
   for (const ShapedPoint& p : source) reach2 = std::max(reach2, p.position.squaredNorm());
-  const double reach = std::sqrt(reach2), research = 0.03 * map.voxel_size();
+  const double reach = std::sqrt(reach2), search_again = 0.03 * map.voxel_size();
   MapPairs pairs;
   Pose T_searched = T_init;
   Eigen::VectorXd y = Eigen::VectorXd::Zero(k);
   for (int it = 0; it < config.max_iterations; ++it) {
     const Pose T = BoxPlus(T_init, D * y);
-    const bool search = it == 0 || LargestShift(T_searched, T, reach) > research;
+    const bool search = it == 0 || LargestShift(T_searched, T, reach) > search_again;
     if (search) T_searched = T;
     const PairSums s =
         AccumulatePairs(map, T_world_prev, source, T, D, is_translation, pairs, search);
