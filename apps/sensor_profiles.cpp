@@ -78,6 +78,13 @@ ProfileChoice RecognizeTum(const fs::path& folder) {
   return Choice("tum-fr3", "TUM RGB-D layout (depth.txt; no fr1/fr2 hint, fr3 assumed)");
 }
 
+/// The sensor a simulated scene is seen by: `sensor`, or for "auto" the scene's own (the street's
+/// rotating LiDAR, a depth camera elsewhere).
+std::string SimulatedSensor(const std::string& scene, const std::string& sensor) {
+  if (sensor != "auto") return sensor;
+  return scene == "street" ? "lidar" : "pinhole";
+}
+
 /// The outputs of `planeslam simulate`: its config.yaml has a simulation section.
 std::optional<ProfileChoice> RecognizeSimulation(const fs::path& folder) {
   std::error_code ec;
@@ -87,8 +94,8 @@ std::optional<ProfileChoice> RecognizeSimulation(const fs::path& folder) {
     const YAML::Node sim = root["simulation"];
     if (!sim || !sim.IsMap()) return std::nullopt;
     const std::string scene = sim["scene"] ? sim["scene"].as<std::string>() : "?";
-    std::string sensor = sim["sensor"] ? sim["sensor"].as<std::string>() : "auto";
-    if (sensor == "auto") sensor = scene == "street" ? "lidar" : "pinhole";
+    const std::string sensor =
+        SimulatedSensor(scene, sim["sensor"] ? sim["sensor"].as<std::string>() : "auto");
     const std::string why =
         "planeslam simulate output (config.yaml: scene " + scene + ", " + sensor + " sensor)";
     if (sensor == "pinhole") return Choice("synthetic", why);
@@ -276,36 +283,39 @@ void ApplyProfile(const ProfileChoice& choice, const std::string& command, Confi
             << " (--sensor " << choice.profile->name << ": " << files << ")\n";
 }
 
-Config LoadConfigWithProfile(const ConfigOptions& options, const std::string& sensor,
-                             const std::string& input, const std::string& command,
-                             ProfileChoice* chosen) {
+namespace {
+
+/// The profile of `choice` (none when null), then the -c files and --set on top.
+Config LoadWithChoice(const ConfigOptions& options, const ProfileChoice* choice,
+                      const std::string& command) {
   Config config;
-  if (!input.empty() || !sensor.empty()) {
-    const ProfileChoice choice = ChooseProfile(sensor, input);
-    ApplyProfile(choice, command, &config);
-    if (chosen != nullptr) *chosen = choice;
-  }
+  if (choice != nullptr) ApplyProfile(*choice, command, &config);
   for (const auto& file : options.config_files) config.LoadFile(file);
   for (const auto& assignment : options.overrides) config.Set(assignment);
   return config;
 }
 
+}  // namespace
+
+Config LoadConfigWithProfile(const ConfigOptions& options, const std::string& sensor,
+                             const std::string& input, const std::string& command,
+                             ProfileChoice* chosen) {
+  if (input.empty() && sensor.empty()) return LoadWithChoice(options, nullptr, command);
+  const ProfileChoice choice = ChooseProfile(sensor, input);
+  if (chosen != nullptr) *chosen = choice;
+  return LoadWithChoice(options, &choice, command);
+}
+
 Config LoadConfigForScene(const ConfigOptions& options, const std::string& sensor,
                           const std::string& scene, const std::string& command) {
   if (!sensor.empty()) return LoadConfigWithProfile(options, sensor, "", command);
-  Config config = LoadConfigWithProfile(options, "", "", command);
+  // The scene and its sensor as the -c files and --set leave them.
+  Config config = LoadWithChoice(options, nullptr, command);
   const SimulationConfig& sim = config.Get<SimulationConfig>("simulation");
   const std::string name = scene.empty() ? sim.scene : scene;
-  const std::string simulated =
-      sim.sensor == "auto" ? (name == "street" ? "lidar" : "pinhole") : sim.sensor;
-  if (simulated != "lidar") return config;
-  // The profile first, then the user's -c files and --set on top, as for a sequence folder.
-  Config profiled;
-  ApplyProfile({FindProfile("kitti"), "built-in scene " + name + ", simulated LiDAR"}, command,
-               &profiled);
-  for (const auto& file : options.config_files) profiled.LoadFile(file);
-  for (const auto& assignment : options.overrides) profiled.Set(assignment);
-  return profiled;
+  if (SimulatedSensor(name, sim.sensor) != "lidar") return config;
+  const ProfileChoice choice = Choice("kitti", "built-in scene " + name + ", simulated LiDAR");
+  return LoadWithChoice(options, &choice, command);
 }
 
 std::string ResolveDepthCamera(const std::string& png, const std::string& intrinsics_option,

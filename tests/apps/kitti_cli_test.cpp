@@ -62,8 +62,6 @@ TEST(KittiCli, SimulatedStreetRunsWithoutConfigAndSkipsABadScan) {
   EXPECT_EQ(summary["skipped_frames"].get<int>(), 1);
 }
 
-/// Reference: 401 poses 1 m apart on a line; estimate: 1.5 % longer steps. Every segment's error
-/// is 0.015 (L + 1) / L (the devkit's last frame lies one step beyond L).
 /// `planeslam run --scene street` (no folder) gets the profile its `simulate` output would get, so
 /// the built-in LiDAR scene runs as configured; --sensor none and the depth-camera scenes keep
 /// the defaults.
@@ -93,6 +91,8 @@ TEST(KittiCli, BuiltInStreetGetsTheLidarProfile) {
   EXPECT_TRUE(Contains(Slurp(dir / "room" / "config.yaml"), "plane_landmarks: true"));
 }
 
+/// Reference: 401 poses 1 m apart on a line; estimate: 1.5 % longer steps. Every segment's error
+/// is 0.015 (L + 1) / L (the devkit's last frame lies one step beyond L).
 TEST(KittiCli, EvalKittiPrintsDevkitSegmentErrors) {
   const fs::path dir = ScratchDir();
   std::string ref, est, tum;
