@@ -8,6 +8,7 @@
 #include <unordered_set>
 
 #include "planeslam/datasets/errors.hpp"
+#include "planeslam/mapping/loop_registration.hpp"
 #include "planeslam/mapping/slam_system.hpp"
 #include "slam_internal.hpp"
 
@@ -97,17 +98,18 @@ void SlamSystem::SearchLoopClosures(const Keyframe& current, SlamFrameResult* re
     candidates.resize(config_.loop_max_candidates);
   }
 
+  LoopRegistrationConfig loop_config;
+  loop_config.prior_translation_sigma = config_.loop_prior_translation_sigma;
+  loop_config.prior_rotation_sigma = config_.loop_prior_rotation_sigma;
+  loop_config.search_radius = config_.loop_search_radius;
+  loop_config.association = association_config_;
+  loop_config.registration = registration_config_;
   for (const Candidate& candidate : candidates) {
     const Keyframe& old = keyframes_[candidate.index];
     ++stats_.loop_candidates;
-    registration::MotionPrior prior;
-    prior.T_prev_curr = KeyframePose(old.id).inverse() * T_world_current;
-    prior.covariance =
-        DiagonalCovariance(config_.loop_prior_translation_sigma, config_.loop_prior_rotation_sigma);
+    const Pose T_old_current = KeyframePose(old.id).inverse() * T_world_current;
     registration::RegistrationResult anchored =
-        registration::AssociatePlanes(old.planes, current.planes, prior, association_config_,
-                                      registration_config_)
-            .registration;
+        AnchoredLoopRegistration(old.planes, current.planes, T_old_current, loop_config);
     if (anchored.converged && anchored.degenerate) FillClosureFromPoints(old, current, &anchored);
     const int fault = VerificationFault(anchored);
     // A second well-determined solution without the anchor: the anchor's offset gate loses the
@@ -117,8 +119,16 @@ void SlamSystem::SearchLoopClosures(const Keyframe& current, SlamFrameResult* re
     // there and the other solution's do not. (The unanchored solution alone is not trusted:
     // where the anchored one finds nothing, it picks the wrong face about as often as the right
     // one.)
-    const registration::RegistrationResult unanchored = UnanchoredRegistration(old, current, prior);
+    const registration::RegistrationResult unanchored =
+        UnanchoredLoopRegistration(old.planes, current.planes, T_old_current, loop_config);
     const bool unanchored_usable = VerificationFault(unanchored) == 0;
+    // An unanchored solution too loose for a closure of its own still shows, where the planes
+    // support it as well, that the anchored one rests on the estimate (loop_registration.hpp).
+    if (fault == 0 && !unanchored_usable &&
+        UnanchoredRivalsAnchored(anchored, unanchored, config_.loop_consistency_chi2)) {
+      ++stats_.loop_refused_ambiguous;
+      continue;
+    }
     const registration::RegistrationResult* chosen = fault == 0 ? &anchored : nullptr;
     bool vouched = false;
     if (unanchored_usable && (fault != 0 || Differ(anchored, unanchored))) {
@@ -151,26 +161,6 @@ void SlamSystem::SearchLoopClosures(const Keyframe& current, SlamFrameResult* re
     record.verified_by = registration::ConstraintSource(reg);
     ProposeClosure(std::move(record), result);
   }
-}
-
-registration::RegistrationResult SlamSystem::UnanchoredRegistration(
-    const Keyframe& old, const Keyframe& current, const registration::MotionPrior& prior) const {
-  // The loop search's registration is anchored on the estimate: its offset gate admits only
-  // partners within a few decimetres of where the drifted trajectory puts them, so after a
-  // drift along a wall a parallel face in front of the wall (a cabinet) can be the only partner
-  // left, and the wrong closure then agrees with the drifted trajectory. The same planes are
-  // associated again without that anchor: offsets gated only by the search radius, no
-  // preference for the prior; the most supported consistent set wins.
-  registration::AssociationConfig free_config = association_config_;
-  free_config.max_offset_difference =
-      std::max(association_config_.max_offset_difference, config_.loop_search_radius);
-  free_config.prior_gate_chi2 = 0.0;
-  registration::MotionPrior free_prior = prior;
-  free_prior.covariance =
-      DiagonalCovariance(config_.loop_search_radius, config_.loop_prior_rotation_sigma);
-  return registration::AssociatePlanes(old.planes, current.planes, free_prior, free_config,
-                                       registration_config_)
-      .registration;
 }
 
 bool SlamSystem::FillClosureFromPoints(const Keyframe& old, const Keyframe& current,
@@ -212,10 +202,7 @@ bool SlamSystem::Differ(const registration::RegistrationResult& a,
   // Two well-determined solutions further apart than their covariances allow: the planes do
   // not single out one relative pose, and the closure is refused rather than trusted to the
   // prior.
-  const Vector6d difference = registration::BoxMinus(b.T_prev_curr, a.T_prev_curr);
-  const Matrix6d covariance = a.covariance + b.covariance;
-  return difference.dot(InformationFromCovariance(covariance) * difference) >
-         config_.loop_consistency_chi2;
+  return RegistrationDifferenceChi2(a, b) > config_.loop_consistency_chi2;
 }
 
 void SlamSystem::InjectFalseClosures(const Keyframe& current, SlamFrameResult* result) {

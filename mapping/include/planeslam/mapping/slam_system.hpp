@@ -342,10 +342,6 @@ class SlamSystem {
                    const std::vector<registration::ShapedPoint>& structure);
   /// Verifies the loop candidates of the new keyframe; the verified ones become hypotheses.
   void SearchLoopClosures(const Keyframe& current, SlamFrameResult* result);
-  /// The loop candidate's planes associated without the estimate's anchor (offsets gated by the
-  /// search radius only, no preference for the prior).
-  registration::RegistrationResult UnanchoredRegistration(
-      const Keyframe& old, const Keyframe& current, const registration::MotionPrior& prior) const;
   /// Fills the directions a loop registration's planes leave open by aligning the current
   /// keyframe's structure to that of the old keyframe and its neighbours. Returns whether the
   /// points determined all of them.
