@@ -2,9 +2,9 @@
 /// A loop candidate's planes registered twice (SlamSystem::SearchLoopClosures): anchored on the
 /// trajectory estimate, whose offset gate keeps the search near where the estimate puts the
 /// partners, and unanchored, whose gates admit any partner within the search radius. After a
-/// drift, the anchored search can pair a plane with a parallel one at the drift's distance (the
-/// road with a surface a metre above it) and find a solution that merely confirms the drift; the
-/// unanchored one then tells it apart.
+/// drift, the anchored search can pair a plane with a parallel one at the drift's distance (a
+/// wall with a cabinet front, the road with a surface a metre above it) and find a solution that
+/// merely confirms the drift; the unanchored one then tells it apart.
 #include <vector>
 
 #include "planeslam/detection/plane.hpp"
