@@ -98,10 +98,7 @@ TEST(LocalMap, RecoversCorridorAxisFromClutterOverRandomDraws) {
 
     LocalMapConfig config;
     const ScanPair pair(prev, curr, T_world_prev);
-    const double voxel = pair.voxel;
-    const LocalVoxelMap& map = pair.map;
-    const std::vector<ShapedPoint>& source = pair.source;
-    const bool used = FillDegenerateFromLocalMap(map, T_world_prev, source, config, &reg);
+    const bool used = FillDegenerateFromLocalMap(pair.map, T_world_prev, pair.source, config, &reg);
     const double error =
         (reg.T_prev_curr.translation() - T_prev_curr.translation()).dot(axis);
     if (!used || std::abs(error) > 0.003) ++failures;
@@ -109,7 +106,7 @@ TEST(LocalMap, RecoversCorridorAxisFromClutterOverRandomDraws) {
       // Filled again (as after a complete outline filled the axis first): nothing is left to
       // the prior, and its count of translations does not go below zero (the velocity model
       // holds the rotation when more directions than translations are left to the prior).
-      FillDegenerateFromLocalMap(map, T_world_prev, source, config, &reg);
+      FillDegenerateFromLocalMap(pair.map, T_world_prev, pair.source, config, &reg);
       EXPECT_EQ(reg.prior_directions, 0);
       EXPECT_EQ(reg.prior_translations, 0);
     }
@@ -139,18 +136,15 @@ TEST(LocalMap, AlignmentConvergesFromAnOffsetBeyondOnePairSearch) {
 
     LocalMapConfig config;
     const ScanPair pair(prev, curr, T_world_prev);
-    const double voxel = pair.voxel;
-    const LocalVoxelMap& map = pair.map;
-    const std::vector<ShapedPoint>& source = pair.source;
     Pose T_init = T_prev_curr;
     T_init.translation() +=
-        1.0 * voxel * Eigen::Vector3d(small(rng), small(rng), small(rng)).normalized();
+        1.0 * pair.voxel * Eigen::Vector3d(small(rng), small(rng), small(rng)).normalized();
     T_init.linear() =
         T_init.linear() *
         ExpSO3(0.0175 * Eigen::Vector3d(small(rng), small(rng), small(rng)).normalized());
     const Matrix6d weak = (Vector6d() << 1.0, 1.0, 1.0, 0.25, 0.25, 0.25).finished().asDiagonal();
-    const MapAlignmentResult a =
-        AlignToLocalMap(map, T_world_prev, source, T_init, Matrix6d::Identity(), weak, config);
+    const MapAlignmentResult a = AlignToLocalMap(pair.map, T_world_prev, pair.source, T_init,
+                                                 Matrix6d::Identity(), weak, config);
     const Pose error = T_prev_curr.inverse() * a.T_prev_curr;
     if (!a.valid || error.translation().norm() > 0.003 ||
         Eigen::AngleAxisd(error.linear()).angle() > 0.1 * M_PI / 180.0) {
