@@ -58,7 +58,8 @@ void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
           "[m] and within this offset (at the current poses)", 0.0, 10.0);
   v.Field("interpolate_frames", c.interpolate_frames,
           "frames between keyframes take their share of the correction of the edge between "
-          "those keyframes (output trajectory)");
+          "those keyframes, and stretches tracked on the prior follow the measured motion on "
+          "both sides (output trajectory)");
   v.Field("loop_closure", c.loop_closure, "search and verify loop closures");
   v.Field("loop_search_radius", c.loop_search_radius,
           "[m] loop candidates are keyframes within this distance", 0.0, 1000.0);

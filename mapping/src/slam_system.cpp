@@ -8,6 +8,7 @@
 #include <unordered_set>
 
 #include "planeslam/datasets/errors.hpp"
+#include "planeslam/mapping/open_stretches.hpp"
 #include "slam_internal.hpp"
 
 namespace planeslam::mapping {
@@ -214,6 +215,27 @@ bool SlamSystem::FillFromDepthImage(std::int64_t keyframe_id, const datasets::Or
                                                       point_to_plane_config_, reg);
 }
 
+namespace {
+
+/// The directions tracking left to the prior (as AccumulateDrift counts them), in world axes.
+Eigen::Matrix<double, 6, Eigen::Dynamic> OpenDirections(bool use_registration,
+                                                        const registration::RegistrationResult& reg,
+                                                        const Eigen::Matrix3d& R_world_keyframe) {
+  Matrix6d R = Matrix6d::Zero();
+  R.topLeftCorner<3, 3>() = R.bottomRightCorner<3, 3>() = R_world_keyframe;
+  if (!use_registration) return R;
+  if (!(reg.used_prior || (reg.degenerate && !reg.used_icp))) {
+    return Eigen::Matrix<double, 6, 0>();
+  }
+  Eigen::Matrix<double, 6, Eigen::Dynamic> open(6, reg.degenerate_directions.size());
+  for (std::size_t k = 0; k < reg.degenerate_directions.size(); ++k) {
+    open.col(static_cast<Eigen::Index>(k)) = R * reg.degenerate_directions[k];
+  }
+  return open;
+}
+
+}  // namespace
+
 void SlamSystem::AccumulateDrift(bool use_registration,
                                  const registration::RegistrationResult& reg,
                                  const Eigen::Matrix3d& R_world_keyframe) {
@@ -360,6 +382,8 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
   Pose T_keyframe_curr = use_registration ? reg.T_prev_curr : prior.T_prev_curr;
   Matrix6d covariance = use_registration ? reg.covariance : prior.covariance;
   AccumulateDrift(use_registration, reg, KeyframePose(keyframe.id).linear());
+  const Eigen::Matrix<double, 6, Eigen::Dynamic> open =
+      OpenDirections(use_registration, reg, KeyframePose(keyframe.id).linear());
   stats_.time_tracking_ms += ElapsedMs(track_start);
   if (!use_registration) ++stats_.untracked_frames;
   result.constrained_by = use_registration ? registration::ConstraintSource(reg) : "prior";
@@ -378,7 +402,7 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
                      RotationAngle(T_keyframe_curr) > config_.keyframe_rotation_deg * kDegToRad;
   const bool weak = result.matches < config_.keyframe_min_matches && result.matches < result.planes;
   if (!(moved || weak)) {
-    frames_.push_back({timestamp, keyframe.id, T_keyframe_curr});
+    frames_.push_back({timestamp, keyframe.id, T_keyframe_curr, open});
     return result;
   }
 
@@ -390,7 +414,7 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
   graph_.AddEdge(previous_id, current.id, T_keyframe_curr, InformationFromCovariance(covariance),
                  EdgeKind::kOdometry);
   paths_->AddEdge(graph_.edges().back());
-  frames_.push_back({timestamp, current.id, Pose::Identity()});
+  frames_.push_back({timestamp, current.id, Pose::Identity(), open});
   T_keyframe_last_ = Pose::Identity();
   covariance_keyframe_last_.setZero();
   result.keyframe = true;
@@ -518,16 +542,16 @@ datasets::Trajectory SlamSystem::EstimatedTrajectory() const {
       if (edge.kind == EdgeKind::kOdometry) measured_in_previous[edge.to] = edge.T_a_b();
     }
   }
-  datasets::Trajectory trajectory;
+  std::vector<TrackedPose> poses(frames_.size());
   for (std::size_t f = 0; f < frames_.size(); ++f) {
     const FrameRecord& record = frames_[f];
     const Pose T_world_keyframe = KeyframePose(record.keyframe_id);
     const std::int64_t next_id = record.keyframe_id + 1;
     const auto measured = measured_in_previous.find(next_id);
-    if (measured == measured_in_previous.end()) {
-      trajectory.Add(record.timestamp, T_world_keyframe * record.T_keyframe_frame);
-      continue;
-    }
+    poses[f].timestamp = record.timestamp;
+    poses[f].open = record.open;
+    poses[f].T_world = T_world_keyframe * record.T_keyframe_frame;
+    if (measured == measured_in_previous.end()) continue;
     // The optimiser corrects the odometry edge to the next keyframe as a whole:
     // T_keyframe_next = correction * measured. The frames between the two were tracked against
     // this keyframe and drifted along the way, so each takes the share of the correction that
@@ -539,8 +563,11 @@ datasets::Trajectory SlamSystem::EstimatedTrajectory() const {
         T_world_keyframe.inverse() * KeyframePose(next_id) * measured->second.inverse();
     const Pose share = registration::BoxPlus(
         Pose::Identity(), alpha * registration::BoxMinus(correction, Pose::Identity()));
-    trajectory.Add(record.timestamp, T_world_keyframe * share * record.T_keyframe_frame);
+    poses[f].T_world = T_world_keyframe * share * record.T_keyframe_frame;
   }
+  if (config_.interpolate_frames) SmoothOpenStretches(&poses, config_.velocity_window);
+  datasets::Trajectory trajectory;
+  for (const TrackedPose& pose : poses) trajectory.Add(pose.timestamp, pose.T_world);
   return trajectory;
 }
 

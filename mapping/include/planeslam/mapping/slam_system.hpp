@@ -115,7 +115,9 @@ struct SlamConfig {
   double landmark_gate_offset = 0.015;
   /// Frames between two keyframes take their share of the optimiser's correction of the
   /// odometry edge between them in the output trajectory (else they follow their keyframe
-  /// rigidly, and the whole correction shows as a jump at the next keyframe).
+  /// rigidly, and the whole correction shows as a jump at the next keyframe); and where tracking
+  /// left translations to the prior, the positions follow the curve through the measured
+  /// motion on both sides of the stretch (open_stretches.hpp), read over velocity_window.
   bool interpolate_frames = true;
   bool loop_closure = true;          ///< search and verify loop closures
   double loop_search_radius = 1.5;   ///< [m] candidate keyframes within this distance
@@ -313,6 +315,8 @@ class SlamSystem {
     double timestamp = 0.0;
     std::int64_t keyframe_id = 0;
     Pose T_keyframe_frame = Pose::Identity();
+    /// The directions its tracking left to the prior, world axes (TrackedPose::open).
+    Eigen::Matrix<double, 6, Eigen::Dynamic> open = Eigen::Matrix<double, 6, 0>();
   };
 
   /// Nodes a path search of the consistency tests settles at most.
