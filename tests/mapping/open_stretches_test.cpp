@@ -173,9 +173,10 @@ TEST(OpenStretches, HermiteBridgesTheStretchAlongItsOpenDirections) {
 TEST(OpenStretches, StretchesWithoutMeasuredEndsStayAsTheyAre) {
   std::mt19937 rng(7);
   for (int d = 0; d < 20; ++d) {
-    Draw draw = MakeDraw(rng);
-    // The stretch runs into the end of the trajectory, or has fewer than three measured poses
-    // before it: no velocity to bridge from, nothing moves.
+    const Draw draw = MakeDraw(rng);
+    // The stretch runs into the end of the trajectory; or only two measured poses lie between
+    // it and open poses from the start on, too few to read a motion from, so the two make one
+    // stretch from the start. No measured motion on one side: nothing moves.
     std::vector<TrackedPose> to_end = draw.poses;
     for (std::size_t i = draw.first; i < to_end.size(); ++i)
       to_end[i].open = draw.poses[draw.first].open;
