@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstddef>
 
+#include "planeslam/registration/theil_sen.hpp"
+
 namespace planeslam::mapping {
 namespace {
 
@@ -29,17 +31,6 @@ Eigen::Matrix3d TranslationProjector(const Eigen::Matrix<double, 6, Eigen::Dynam
   return U * U.transpose();
 }
 
-/// Median of a non-empty list (reorders it).
-double Median(std::vector<double>* values) {
-  const std::size_t k = values->size() / 2;
-  std::nth_element(values->begin(), values->begin() + static_cast<std::ptrdiff_t>(k),
-                   values->end());
-  const double upper = (*values)[k];
-  if (values->size() % 2 == 1) return upper;
-  return 0.5 * (upper + *std::max_element(values->begin(),
-                                          values->begin() + static_cast<std::ptrdiff_t>(k)));
-}
-
 /// A measured end of a stretch: the Theil-Sen line through the positions of its window at the
 /// window's middle, where the slope of a line through a curving motion is its velocity.
 struct EndState {
@@ -47,29 +38,6 @@ struct EndState {
   Eigen::Vector3d position = Eigen::Vector3d::Zero();
   Eigen::Vector3d velocity = Eigen::Vector3d::Zero();
 };
-
-/// Theil-Sen line per axis of the points (t_k, x_k), at the middle of their times.
-EndState TheilSenLine(const std::vector<double>& t, const std::vector<Eigen::Vector3d>& x) {
-  EndState line;
-  line.time = 0.5 * (*std::min_element(t.begin(), t.end()) + *std::max_element(t.begin(), t.end()));
-  std::vector<double> values;
-  for (int axis = 0; axis < 3; ++axis) {
-    values.clear();
-    for (std::size_t i = 0; i < t.size(); ++i) {
-      for (std::size_t j = i + 1; j < t.size(); ++j) {
-        if (std::abs(t[j] - t[i]) > 1e-9)
-          values.push_back((x[j](axis) - x[i](axis)) / (t[j] - t[i]));
-      }
-    }
-    if (!values.empty()) line.velocity(axis) = Median(&values);
-    values.clear();
-    for (std::size_t i = 0; i < t.size(); ++i) {
-      values.push_back(x[i](axis) - line.velocity(axis) * (t[i] - line.time));
-    }
-    line.position(axis) = Median(&values);
-  }
-  return line;
-}
 
 /// The measured end at pose `i`: the line through it and the measured poses within `span` of
 /// it on the side `step` (-1 before, +1 after), robust to one frame's error. False with fewer
@@ -86,8 +54,11 @@ bool MeasuredEnd(const std::vector<TrackedPose>& poses, std::size_t i, int step,
     position.push_back(pose.T_world.translation());
   }
   if (t.size() < kMinEndPoses) return false;
-  *end = TheilSenLine(t, position);
-  return true;
+  end->time = 0.5 * (*std::min_element(t.begin(), t.end()) + *std::max_element(t.begin(), t.end()));
+  const registration::TheilSenLine line = registration::FitTheilSenLine(t, position, end->time);
+  end->position = line.value;
+  end->velocity = line.slope;
+  return line.valid;
 }
 
 /// Re-interpolates the positions of poses first..last (open) between the measured poses

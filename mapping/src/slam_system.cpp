@@ -217,7 +217,8 @@ bool SlamSystem::FillFromDepthImage(std::int64_t keyframe_id, const datasets::Or
 
 namespace {
 
-/// The directions tracking left to the prior (as AccumulateDrift counts them), in world axes.
+/// The directions tracking left to the prior, in world axes: all of them without a registration,
+/// else the planes' open ones unless points or extents filled them all.
 Eigen::Matrix<double, 6, Eigen::Dynamic> OpenDirections(bool use_registration,
                                                         const registration::RegistrationResult& reg,
                                                         const Eigen::Matrix3d& R_world_keyframe) {
@@ -236,27 +237,13 @@ Eigen::Matrix<double, 6, Eigen::Dynamic> OpenDirections(bool use_registration,
 
 }  // namespace
 
-void SlamSystem::AccumulateDrift(bool use_registration,
-                                 const registration::RegistrationResult& reg,
-                                 const Eigen::Matrix3d& R_world_keyframe) {
-  // One frame's change of velocity (the prior's sigmas) along the directions left to the prior:
-  // all of them without a registration, else the planes' open ones when no points filled them
-  // all. Rotated from the keyframe's tangent into world axes.
-  const Matrix6d step = DiagonalCovariance(config_.prior_translation_sigma,
-                                           config_.prior_rotation_sigma);
-  Matrix6d open = Matrix6d::Zero();
-  if (!use_registration) {
-    open = step;
-  } else if (reg.used_prior || (reg.degenerate && !reg.used_icp)) {
-    Matrix6d P = Matrix6d::Zero();
-    for (const registration::Vector6d& d : reg.degenerate_directions) P += d * d.transpose();
-    open = P * step * P;
-  } else {
-    return;
-  }
-  Matrix6d R = Matrix6d::Zero();
-  R.topLeftCorner<3, 3>() = R.bottomRightCorner<3, 3>() = R_world_keyframe;
-  drift_covariance_ += R * open * R.transpose();
+void SlamSystem::AccumulateDrift(const Eigen::Matrix<double, 6, Eigen::Dynamic>& open) {
+  // One frame's change of velocity (the prior's sigmas) along those directions; the sigmas are
+  // the same on every axis, so the projection commutes with the rotation into the world.
+  if (open.cols() == 0) return;
+  const Matrix6d P = open * open.transpose();
+  drift_covariance_ +=
+      P * DiagonalCovariance(config_.prior_translation_sigma, config_.prior_rotation_sigma) * P;
 }
 
 void SlamSystem::UpdateVelocity(double timestamp, double dt, std::size_t keyframe_frame,
@@ -381,9 +368,9 @@ SlamFrameResult SlamSystem::TrackFrame(double timestamp, const datasets::Organiz
   const bool use_registration = reg.converged && !result.refused;
   Pose T_keyframe_curr = use_registration ? reg.T_prev_curr : prior.T_prev_curr;
   Matrix6d covariance = use_registration ? reg.covariance : prior.covariance;
-  AccumulateDrift(use_registration, reg, KeyframePose(keyframe.id).linear());
   const Eigen::Matrix<double, 6, Eigen::Dynamic> open =
       OpenDirections(use_registration, reg, KeyframePose(keyframe.id).linear());
+  AccumulateDrift(open);
   stats_.time_tracking_ms += ElapsedMs(track_start);
   if (!use_registration) ++stats_.untracked_frames;
   result.constrained_by = use_registration ? registration::ConstraintSource(reg) : "prior";

@@ -3,20 +3,9 @@
 #include <algorithm>
 #include <vector>
 
+#include "planeslam/registration/theil_sen.hpp"
+
 namespace planeslam::registration {
-
-namespace {
-
-/// Median of a non-empty list (reorders it).
-double Median(std::vector<double>* values) {
-  const std::size_t k = values->size() / 2;
-  std::nth_element(values->begin(), values->begin() + k, values->end());
-  const double upper = (*values)[k];
-  if (values->size() % 2 == 1) return upper;
-  return 0.5 * (upper + *std::max_element(values->begin(), values->begin() + k));
-}
-
-}  // namespace
 
 void VelocityModel::AddTo(std::deque<Motion>& motions, double* held_time, double timestamp,
                           double dt, const Eigen::Vector3d& delta, int span) {
@@ -72,25 +61,11 @@ Eigen::Vector3d VelocityModel::TrendRate(const std::deque<Motion>& motions, doub
     t.push_back(m.timestamp - 0.5 * m.dt - t_latest);
     rate.push_back(m.delta / m.dt);
   }
-  // Theil-Sen line per axis (median of the pairwise slopes, then of the intercepts): one wrong
-  // motion at the end of the window, where a least-squares line has the most leverage, does
-  // not set the trend that the held turn is continued along.
-  Eigen::Vector3d result;
-  std::vector<double> values;
-  for (int axis = 0; axis < 3; ++axis) {
-    values.clear();
-    for (std::size_t i = 0; i < t.size(); ++i) {
-      for (std::size_t j = i + 1; j < t.size(); ++j) {
-        if (t[j] - t[i] > 1e-9) values.push_back((rate[j](axis) - rate[i](axis)) / (t[j] - t[i]));
-      }
-    }
-    if (values.empty()) return Rate(motions, dt);
-    const double slope = Median(&values);
-    values.clear();
-    for (std::size_t i = 0; i < t.size(); ++i) values.push_back(rate[i](axis) - slope * t[i]);
-    result(axis) = (Median(&values) + slope * at) * dt;
-  }
-  return result;
+  // A Theil-Sen line: one wrong motion at the end of the window, where a least-squares line has
+  // the most leverage, does not set the trend that the held turn is continued along.
+  const TheilSenLine line = FitTheilSenLine(t, rate, 0.0);
+  if (!line.valid) return Rate(motions, dt);
+  return (line.value + line.slope * at) * dt;
 }
 
 Pose VelocityModel::PredictContinuingHeldTurn(double dt, double timestamp) const {

@@ -396,10 +396,9 @@ class SlamSystem {
   /// uncertainty (slam_reacquisition.cpp). Returns whether it moved the pose.
   bool Reacquire(const detection::Segmentation& segmentation, std::int64_t keyframe_id,
                  Pose* T_world_sensor, Pose* T_keyframe_curr, Matrix6d* covariance);
-  /// Adds one frame's prior uncertainty along the directions left to the prior to
-  /// drift_covariance_ (directions in the keyframe's tangent, rotated into the world).
-  void AccumulateDrift(bool use_registration, const registration::RegistrationResult& reg,
-                       const Eigen::Matrix3d& R_world_keyframe);
+  /// Adds one frame's prior uncertainty along the directions its tracking left to the prior
+  /// (unit columns, world axes) to drift_covariance_.
+  void AccumulateDrift(const Eigen::Matrix<double, 6, Eigen::Dynamic>& open);
   /// Adds the frame's motion since the previous one (T_keyframe_last_ to T_keyframe_curr) to the
   /// velocity, holding the parts the prior supplied; `keyframe_frame` is the keyframe's frame.
   void UpdateVelocity(double timestamp, double dt, std::size_t keyframe_frame,

@@ -1,0 +1,46 @@
+#include "planeslam/registration/theil_sen.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+
+namespace planeslam::registration {
+namespace {
+
+/// Median of a non-empty list (reorders it).
+double Median(std::vector<double>* values) {
+  const std::size_t k = values->size() / 2;
+  const auto middle = values->begin() + static_cast<std::ptrdiff_t>(k);
+  std::nth_element(values->begin(), middle, values->end());
+  const double upper = *middle;
+  if (values->size() % 2 == 1) return upper;
+  return 0.5 * (upper + *std::max_element(values->begin(), middle));
+}
+
+}  // namespace
+
+TheilSenLine FitTheilSenLine(const std::vector<double>& t, const std::vector<Eigen::Vector3d>& x,
+                             double origin) {
+  TheilSenLine line;
+  std::vector<double> values;
+  for (int axis = 0; axis < 3; ++axis) {
+    values.clear();
+    for (std::size_t i = 0; i < t.size(); ++i) {
+      for (std::size_t j = i + 1; j < t.size(); ++j) {
+        if (std::abs(t[j] - t[i]) > 1e-9)
+          values.push_back((x[j](axis) - x[i](axis)) / (t[j] - t[i]));
+      }
+    }
+    if (values.empty()) return line;
+    line.slope(axis) = Median(&values);
+    values.clear();
+    for (std::size_t i = 0; i < t.size(); ++i) {
+      values.push_back(x[i](axis) - line.slope(axis) * (t[i] - origin));
+    }
+    line.value(axis) = Median(&values);
+  }
+  line.valid = true;
+  return line;
+}
+
+}  // namespace planeslam::registration
