@@ -58,8 +58,9 @@ void VisitSlam(FieldVisitor& v, mapping::SlamConfig& c) {
           "[m] and within this offset (at the current poses)", 0.0, 10.0);
   v.Field("interpolate_frames", c.interpolate_frames,
           "frames between keyframes take their share of the correction of the edge between "
-          "those keyframes, and stretches tracked on the prior follow the measured motion on "
-          "both sides (output trajectory)");
+          "those keyframes, stretches tracked on the prior follow the measured motion on both "
+          "sides, and a frame or two far off that motion are put back on it (output "
+          "trajectory; summary.json outlier_frames)");
   v.Field("loop_closure", c.loop_closure, "search and verify loop closures");
   v.Field("loop_search_radius", c.loop_search_radius,
           "[m] loop candidates are keyframes within this distance", 0.0, 1000.0);

@@ -229,7 +229,8 @@ std::string RunSession::Write(const std::string& out_dir) {
   // Everything is computed before the first file is written; each file is written atomically.
   const auto t = Clock::now();
   EnsureDirectory(out_dir);
-  const ds::Trajectory estimate = slam_->EstimatedTrajectory();
+  std::vector<double> outliers;
+  const ds::Trajectory estimate = slam_->EstimatedTrajectory(&outliers);
   // The OctoMap (ray casting every keyframe: the longest output) is built on its own thread from
   // copies of the poses while this one writes the rest; it reads nothing else that changes.
   std::future<void> octomap;
@@ -278,6 +279,7 @@ std::string RunSession::Write(const std::string& out_dir) {
       {"point_to_plane_frames", stats.point_to_plane_frames},
       {"prior_frames", stats.prior_frames},
       {"untracked_frames", stats.untracked_frames},
+      {"outlier_frames", {{"count", outliers.size()}, {"timestamps", outliers}}},
       {"map_planes", slam_->map().size()},
       {"final_optimization",
        {{"initial_cost", final_optimization_.initial_cost},

@@ -521,7 +521,7 @@ PoseGraphResult SlamSystem::Finish() {
   return result;
 }
 
-datasets::Trajectory SlamSystem::EstimatedTrajectory() const {
+datasets::Trajectory SlamSystem::EstimatedTrajectory(std::vector<double>* outliers) const {
   // The measured pose of each keyframe in its predecessor: its odometry edge.
   std::unordered_map<std::int64_t, Pose> measured_in_previous;
   if (config_.interpolate_frames) {
@@ -538,6 +538,7 @@ datasets::Trajectory SlamSystem::EstimatedTrajectory() const {
     poses[f].timestamp = record.timestamp;
     poses[f].open = record.open;
     poses[f].T_world = T_world_keyframe * record.T_keyframe_frame;
+    poses[f].anchored = keyframes_[static_cast<std::size_t>(record.keyframe_id)].frame == f;
     if (measured == measured_in_previous.end()) continue;
     // The optimiser corrects the odometry edge to the next keyframe as a whole:
     // T_keyframe_next = correction * measured. The frames between the two were tracked against
@@ -552,7 +553,12 @@ datasets::Trajectory SlamSystem::EstimatedTrajectory() const {
         Pose::Identity(), alpha * registration::BoxMinus(correction, Pose::Identity()));
     poses[f].T_world = T_world_keyframe * share * record.T_keyframe_frame;
   }
-  if (config_.interpolate_frames) SmoothOpenStretches(&poses, config_.velocity_window);
+  if (config_.interpolate_frames) {
+    SmoothOpenStretches(&poses, config_.velocity_window);
+    for (const std::size_t f : ReinterpolateOutliers(&poses)) {
+      if (outliers != nullptr) outliers->push_back(poses[f].timestamp);
+    }
+  }
   datasets::Trajectory trajectory;
   for (const TrackedPose& pose : poses) trajectory.Add(pose.timestamp, pose.T_world);
   return trajectory;

@@ -117,7 +117,9 @@ struct SlamConfig {
   /// odometry edge between them in the output trajectory (else they follow their keyframe
   /// rigidly, and the whole correction shows as a jump at the next keyframe); and where tracking
   /// left translations to the prior, the positions follow the curve through the measured
-  /// motion on both sides of the stretch (open_stretches.hpp), read over velocity_window.
+  /// motion on both sides of the stretch, read over velocity_window; a frame (not a keyframe)
+  /// far off the motion of the frames on both sides takes that motion's position
+  /// (open_stretches.hpp).
   bool interpolate_frames = true;
   bool loop_closure = true;          ///< search and verify loop closures
   double loop_search_radius = 1.5;   ///< [m] candidate keyframes within this distance
@@ -277,8 +279,10 @@ class SlamSystem {
   /// Every loop-closure hypothesis, in the order proposed.
   const std::vector<LoopClosureRecord>& closures() const { return closures_; }
 
-  /// Every processed frame's pose: T_world_keyframe (current graph) * T_keyframe_frame.
-  datasets::Trajectory EstimatedTrajectory() const;
+  /// Every processed frame's pose: T_world_keyframe (current graph) * T_keyframe_frame; with
+  /// slam.interpolate_frames, outliers and open stretches re-interpolated (open_stretches.hpp),
+  /// the outliers' timestamps appended to `outliers`.
+  datasets::Trajectory EstimatedTrajectory(std::vector<double>* outliers = nullptr) const;
   /// Keyframe poses (current graph), by keyframe id.
   std::unordered_map<std::int64_t, Pose> KeyframePoses() const;
   /// Frame index of each keyframe id.
