@@ -2,7 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
-#include <unordered_map>
+#include <vector>
 
 namespace planeslam::mapping {
 
@@ -22,19 +22,21 @@ std::uint32_t ViewBins::Bin(const Eigen::Vector3d& direction) {
 
 ViewBins::ViewBins(const datasets::OrganizedCloud& cloud, int stride) {
   stride = std::max(1, stride);
-  std::unordered_map<std::uint32_t, float> farthest;
+  // Every bin of the cube map (24,576 floats, 0 = no return), then the ones with returns in order.
+  std::vector<float> farthest(6 * kBinsPerFace * kBinsPerFace, 0.0f);
   for (int r = 0; r < cloud.height; r += stride) {
     for (int c = 0; c < cloud.width; c += stride) {
       const Eigen::Vector3f& p = cloud.at(r, c);
       if (!p.allFinite()) continue;
       const float range = p.norm();
       if (!(range > 0)) continue;
-      const auto [it, inserted] = farthest.try_emplace(Bin(p.cast<double>()), range);
-      if (!inserted) it->second = std::max(it->second, range);
+      float& bin = farthest[Bin(p.cast<double>())];
+      bin = std::max(bin, range);
     }
   }
-  farthest_.assign(farthest.begin(), farthest.end());
-  std::sort(farthest_.begin(), farthest_.end());
+  for (std::uint32_t bin = 0; bin < farthest.size(); ++bin) {
+    if (farthest[bin] > 0) farthest_.emplace_back(bin, farthest[bin]);
+  }
 }
 
 bool ViewBins::Reaches(const Eigen::Vector3d& p_sensor, double tolerance) const {

@@ -58,7 +58,9 @@ void MarkCompleteness(const datasets::OrganizedCloud& cloud,
   complete->assign(planes.size(), 1);
   edges->assign(cloud.points.size(), 0);
   std::vector<int> boundary(planes.size(), 0), gap_cuts(planes.size(), 0);
-  for (int row = 0; row < h; ++row) {
+  // Most regions reach the image border in their first rows: once none is left, stop.
+  int left = n;
+  for (int row = 0; row < h && left > 0; ++row) {
     for (int col = 0; col < w; ++col) {
       const std::size_t i = static_cast<std::size_t>(row) * w + col;
       const int label = labels[i];
@@ -92,7 +94,10 @@ void MarkCompleteness(const datasets::OrganizedCloud& cloud,
           break;
         }
       }
-      if (cut) (*complete)[label - 1] = 0;
+      if (cut) {
+        (*complete)[label - 1] = 0;
+        --left;
+      }
       (*edges)[i] = outline;
       boundary[label - 1] += outline > 0 ? 1 : 0;
       gap_cuts[label - 1] += gap ? 1 : 0;
@@ -191,16 +196,17 @@ std::vector<PlaneExtent> ComputePlaneExtents(const datasets::OrganizedCloud& clo
   MarkCompleteness(cloud, labels, planes, config, &complete, &edges);
 
   const int n = static_cast<int>(planes.size());
+  if (std::none_of(complete.begin(), complete.end(), [](char c) { return c != 0; })) return out;
   std::vector<Accumulator> acc(planes.size());
   for (int row = 0; row < cloud.height; ++row) {
     for (int col = 0; col < cloud.width; ++col) {
       const std::size_t i = static_cast<std::size_t>(row) * cloud.width + col;
       const int label = labels[i];
-      if (label < 1 || label > n) continue;
+      if (label < 1 || label > n || !complete[label - 1]) continue;
       PlaneExtent& e = out[label - 1];
       ++e.pixels;
       e.boundary_pixels += edges[i] > 0 ? 1 : 0;
-      if (!complete[label - 1] || !cloud.IsValid(i)) continue;
+      if (!cloud.IsValid(i)) continue;
       const detection::Plane& plane = planes[label - 1];
       const Eigen::Vector3d ray = Ray(cloud, i);
       const double rho = RangeToPlane(plane, ray);

@@ -60,8 +60,8 @@ struct PlaneExtentConfig {
   std::vector<std::string> Validate() const;
 };
 
-/// The outline statistics of one detected plane (sensor frame). All but `complete`,
-/// `pixels` and `boundary_pixels` are set only for complete planes.
+/// The outline statistics of one detected plane (sensor frame). All but `complete` are set only
+/// for complete planes.
 struct PlaneExtent {
   bool complete = false;
   int pixels = 0;           ///< pixels of its region
