@@ -38,8 +38,8 @@ struct TrackedPose {
 /// each side (Theil-Sen lines, robust to a second wrong pose among them), exact on any motion of
 /// constant acceleration. A pose is an outlier when it is off its prediction by more than ten
 /// times the median of that distance over the poses within fifty frames, and by more than a
-/// millimetre; the worst is replaced first and its neighbours judged again. Rotations are kept.
-/// Timestamps must increase.
+/// millimetre; the worst is replaced first and its neighbours judged again. The five poses at
+/// either end are not judged; rotations are kept. Timestamps must increase.
 std::vector<std::size_t> ReinterpolateOutliers(std::vector<TrackedPose>* poses);
 
 /// Re-interpolates the open translations of every stretch of consecutive poses with open
