@@ -96,12 +96,6 @@ constexpr double kOutlierFactor = 10.0;
 /// ... and by more than this [m]: below it, a pose is within any sensor's resolution.
 constexpr double kOutlierFloor = 0.001;
 
-double Median(std::vector<double> values) {
-  const auto middle = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
-  std::nth_element(values.begin(), middle, values.end());
-  return *middle;
-}
-
 /// Where the poses on both sides of `i` put it. Each side's Theil-Sen line gives the velocity at
 /// its window's mean time, and its position there up to a q / 2 for an acceleration a (q the
 /// median squared offset of the window's times from their mean: the line's value is the median
@@ -123,7 +117,7 @@ Eigen::Vector3d BothSidesPrediction(const std::vector<TrackedPose>& poses, std::
     }
     std::vector<double> squared_offsets;
     for (const double tk : t) squared_offsets.push_back((tk - mean) * (tk - mean));
-    spread[s] = Median(squared_offsets);
+    spread[s] = registration::Median(&squared_offsets);
     const registration::TheilSenLine line = registration::FitTheilSenLine(t, position, mean);
     side[s] = {mean, line.value, line.slope};
   }
@@ -150,8 +144,11 @@ std::vector<std::size_t> ReinterpolateOutliers(std::vector<TrackedPose>* poses) 
   for (std::size_t i = begin; i < end; ++i) {
     const std::size_t lo = std::max(begin, i - std::min(i, kScaleHalfWidth));
     const std::size_t hi = std::min(end, i + kScaleHalfWidth + 1);
-    limit[i] = std::max(kOutlierFloor,
-                        kOutlierFactor * Median({deviation.begin() + lo, deviation.begin() + hi}));
+    // The upper median: the middle value, or the larger of the two middle ones.
+    std::vector<double> around(deviation.begin() + lo, deviation.begin() + hi);
+    const auto middle = around.begin() + static_cast<std::ptrdiff_t>(around.size() / 2);
+    std::nth_element(around.begin(), middle, around.end());
+    limit[i] = std::max(kOutlierFloor, kOutlierFactor * *middle);
   }
   // The worst outlier first: two neighbouring outliers would otherwise bend the lines of the
   // poses next to them; once one is replaced, the deviations that read it are recomputed.

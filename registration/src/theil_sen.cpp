@@ -5,9 +5,6 @@
 #include <cstddef>
 
 namespace planeslam::registration {
-namespace {
-
-/// Median of a non-empty list (reorders it).
 double Median(std::vector<double>* values) {
   const std::size_t k = values->size() / 2;
   const auto middle = values->begin() + static_cast<std::ptrdiff_t>(k);
@@ -16,8 +13,6 @@ double Median(std::vector<double>* values) {
   if (values->size() % 2 == 1) return upper;
   return 0.5 * (upper + *std::max_element(values->begin(), middle));
 }
-
-}  // namespace
 
 TheilSenLine FitTheilSenLine(const std::vector<double>& t, const std::vector<Eigen::Vector3d>& x,
                              double origin) {

@@ -14,6 +14,9 @@ struct TheilSenLine {
   bool valid = false;  ///< false without two points more than 1e-9 apart in t
 };
 
+/// Median of a non-empty list (the mean of the two middle values for an even count); reorders it.
+double Median(std::vector<double>* values);
+
 /// The line through (t_k, x_k), its value taken at t = `origin`.
 TheilSenLine FitTheilSenLine(const std::vector<double>& t, const std::vector<Eigen::Vector3d>& x,
                              double origin);
