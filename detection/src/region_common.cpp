@@ -68,6 +68,40 @@ bool VisibleHere(const Eigen::Vector3f& p, double s, const RayPlane& own, const 
   return std::abs(s_other - s) < std::abs(s_own - s);
 }
 
+CreaseEvidence NeighbourhoodEvidence(const datasets::OrganizedCloud& cloud, int x, int y,
+                                     bool spherical, const RayPlane& own, const RayPlane& other,
+                                     const DetectionParams& params) {
+  // Signed offsets along the rays, summed over the valid pixels of the 3x3 window: the noise of
+  // a mean of n pixels is sigma / sqrt(n), so the window tells apart planes a single pixel's
+  // depth cannot.
+  double sum_own = 0.0, sum_other = 0.0, sigma2 = 0.0;
+  int n = 0;
+  for (int v = std::max(y - 1, 0); v <= std::min(y + 1, cloud.height - 1); ++v) {
+    for (int u = std::max(x - 1, 0); u <= std::min(x + 1, cloud.width - 1); ++u) {
+      const std::size_t j = static_cast<std::size_t>(v) * cloud.width + u;
+      if (!cloud.IsValid(j)) continue;
+      const Eigen::Vector3d q = cloud.points[j].cast<double>();
+      const double s = PointDepth(cloud.points[j], spherical);
+      double s_own, s_other;
+      if (!(s > 0.0) || !DepthOnPlane(q, s, own, s_own) || !DepthOnPlane(q, s, other, s_other)) {
+        continue;
+      }
+      sum_own += s_own - s;
+      sum_other += s_other - s;
+      const double sigma = params.Sigma(s);
+      sigma2 += sigma * sigma;
+      ++n;
+    }
+  }
+  constexpr int kMinPixels = 5;
+  if (n < kMinPixels || !(sigma2 > 0.0)) return CreaseEvidence::kUndecided;
+  // |mean| <= k sqrt(sum sigma^2) / n, written without the division.
+  const double gate = kCreaseGateSigmas * std::sqrt(sigma2);
+  const bool fits_own = std::abs(sum_own) <= gate, fits_other = std::abs(sum_other) <= gate;
+  if (fits_own == fits_other) return CreaseEvidence::kUndecided;
+  return fits_own ? CreaseEvidence::kOwn : CreaseEvidence::kOther;
+}
+
 double RayOffset(const Eigen::Vector3f& p, double s, const RayPlane& plane) {
   double s_plane;
   if (!DepthOnPlane(p.cast<double>(), s, plane, s_plane)) {
@@ -137,8 +171,10 @@ void ForEachUnassignedBesideRegion(const std::vector<std::int32_t>& labels, int 
 /// The ray fit of every region (see DetectionParams::ray_fit), in two steps.
 /// 1. Fit each region along the rays, from its ray sums `sums`.
 /// 2. Crease competition (up to kCreasePasses passes, the first over `border_pixels` and the
-///    valid pixels of no region beside one): a pixel 4-adjacent to another region moves there
-///    when VisibleHere says its ray sees that region's surface, and a pixel of no region joins
+///    valid pixels of no region beside one): a pixel 4-adjacent to another region, within
+///    kCreaseGateSigmas sigma(s) of its plane, moves there when its 3x3 window lies on that
+///    plane and off its own (NeighbourhoodEvidence), or, where the window fits both or
+///    neither, when VisibleHere says its ray sees that region's surface; a pixel of no region joins
 ///    the neighbouring region whose plane passes within kCreaseGateSigmas sigma(s) of it along
 ///    the ray (the nearest); the regions that changed
 ///    are fitted again, and the next pass looks only around the pixels that moved. Growth admits
@@ -216,7 +252,20 @@ std::vector<RayPlane> FitAlongRays(const datasets::OrganizedCloud& cloud,
       bool asked = false;
       for (int b = 0; b < a; ++b) asked |= around[b] == other;
       if (asked) continue;
-      if (VisibleHere(cloud.points[i], s, planes[r], planes[other], params)) return other;
+      // Only a pixel within the noise of `other`'s plane may move. Its window decides where it
+      // can: a pixel near the line where two planes meet fits both, and a band of one surface
+      // along that line, beyond where the other surface ends, would tilt the other's plane.
+      // Visibility decides where the window fits both or neither (a window across a depth edge).
+      if (RayOffset(cloud.points[i], s, planes[other]) > kCreaseGateSigmas * params.Sigma(s)) {
+        continue;
+      }
+      const CreaseEvidence evidence =
+          NeighbourhoodEvidence(cloud, x, y, spherical, planes[r], planes[other], params);
+      if (evidence == CreaseEvidence::kOther) return other;
+      if (evidence == CreaseEvidence::kUndecided &&
+          VisibleHere(cloud.points[i], s, planes[r], planes[other], params)) {
+        return other;
+      }
     }
     return r;
   };
