@@ -71,33 +71,39 @@ bool VisibleHere(const Eigen::Vector3f& p, double s, const RayPlane& own, const 
 CreaseEvidence NeighbourhoodEvidence(const datasets::OrganizedCloud& cloud, int x, int y,
                                      bool spherical, const RayPlane& own, const RayPlane& other,
                                      const DetectionParams& params) {
-  // Signed offsets along the rays, summed over the valid pixels of the 3x3 window: the noise of
-  // a mean of n pixels is sigma / sqrt(n), so the window tells apart planes a single pixel's
-  // depth cannot.
-  double sum_own = 0.0, sum_other = 0.0, sigma2 = 0.0;
+  // The mean point of the valid pixels of the 3x3 window, and how far along its ray each plane
+  // lies from it: the noise of a mean of n points is sigma / sqrt(n), so the window tells apart
+  // planes a single pixel's depth cannot. Float: the offsets meet millimetres of noise.
+  const auto sigma0 = static_cast<float>(params.sigma0);
+  const auto sigma_z2 = static_cast<float>(params.sigma_z2);
+  Eigen::Vector3f sum = Eigen::Vector3f::Zero();
+  float sigma2 = 0.0f;
   int n = 0;
+  const int u0 = std::max(x - 1, 0), u1 = std::min(x + 1, cloud.width - 1);
   for (int v = std::max(y - 1, 0); v <= std::min(y + 1, cloud.height - 1); ++v) {
-    for (int u = std::max(x - 1, 0); u <= std::min(x + 1, cloud.width - 1); ++u) {
-      const std::size_t j = static_cast<std::size_t>(v) * cloud.width + u;
-      if (!cloud.IsValid(j)) continue;
-      const Eigen::Vector3d q = cloud.points[j].cast<double>();
-      const double s = PointDepth(cloud.points[j], spherical);
-      double s_own, s_other;
-      if (!(s > 0.0) || !DepthOnPlane(q, s, own, s_own) || !DepthOnPlane(q, s, other, s_other)) {
-        continue;
-      }
-      sum_own += s_own - s;
-      sum_other += s_other - s;
-      const double sigma = params.Sigma(s);
+    const Eigen::Vector3f* row = cloud.points.data() + static_cast<std::size_t>(v) * cloud.width;
+    for (int u = u0; u <= u1; ++u) {
+      const Eigen::Vector3f& q = row[u];
+      // An invalid point has a non-finite z, which fails the comparison.
+      const float s = PointDepth(q, spherical);
+      if (!(s > 0.0f)) continue;
+      sum += q;
+      const float sigma = sigma0 + sigma_z2 * s * s;
       sigma2 += sigma * sigma;
       ++n;
     }
   }
   constexpr int kMinPixels = 5;
-  if (n < kMinPixels || !(sigma2 > 0.0)) return CreaseEvidence::kUndecided;
-  // |mean| <= k sqrt(sum sigma^2) / n, written without the division.
-  const double gate = kCreaseGateSigmas * std::sqrt(sigma2);
-  const bool fits_own = std::abs(sum_own) <= gate, fits_other = std::abs(sum_other) <= gate;
+  if (n < kMinPixels || !(sigma2 > 0.0f)) return CreaseEvidence::kUndecided;
+  const Eigen::Vector3f mean = sum / static_cast<float>(n);
+  const float s = PointDepth(mean, spherical);
+  const float np_own = own.normal.cast<float>().dot(mean);
+  const float np_other = other.normal.cast<float>().dot(mean);
+  if (!(s > 0.0f && np_own > 0.0f && np_other > 0.0f)) return CreaseEvidence::kUndecided;
+  // Within kCreaseGateSigmas sqrt(sum sigma^2) / n of each plane along the ray.
+  const float gate = static_cast<float>(kCreaseGateSigmas) * std::sqrt(sigma2) / n;
+  const bool fits_own = std::abs(s * (static_cast<float>(own.d) / np_own - 1.0f)) <= gate;
+  const bool fits_other = std::abs(s * (static_cast<float>(other.d) / np_other - 1.0f)) <= gate;
   if (fits_own == fits_other) return CreaseEvidence::kUndecided;
   return fits_own ? CreaseEvidence::kOwn : CreaseEvidence::kOther;
 }

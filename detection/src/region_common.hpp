@@ -53,10 +53,10 @@ RayPlane SolveRegion(const RaySums& sums, const MomentSums& region);
 bool VisibleHere(const Eigen::Vector3f& p, double s, const RayPlane& own, const RayPlane& other,
                  const DetectionParams& params);
 
-/// Which of two planes the valid pixels of the 3x3 window around pixel (x, y) lie on: the
-/// mean of their signed offsets along the rays is within kCreaseGateSigmas of the mean's noise
-/// (sigma / sqrt(n)) from one plane only; undecided where it fits both (near the line where
-/// they meet), neither (a window across a depth edge), or under five pixels are valid.
+/// Which of two planes the valid pixels of the 3x3 window around pixel (x, y) lie on: their
+/// mean point is within kCreaseGateSigmas of its noise (sigma / sqrt(n)) from one plane only,
+/// along its ray; undecided where it fits both (near the line where they meet), neither (a
+/// window across a depth edge), or under five pixels are valid.
 enum class CreaseEvidence { kOwn, kOther, kUndecided };
 CreaseEvidence NeighbourhoodEvidence(const datasets::OrganizedCloud& cloud, int x, int y,
                                      bool spherical, const RayPlane& own, const RayPlane& other,
