@@ -50,22 +50,31 @@ RayPlane SolveRegion(const RaySums& sums, const MomentSums& region) {
   return plane;
 }
 
-bool VisibleHere(const Eigen::Vector3f& p, double s, const RayPlane& own, const RayPlane& other,
-                 const DetectionParams& params) {
-  const Eigen::Vector3d pd = p.cast<double>();
-  // Depths at which the pixel's ray meets each plane; the gate on `other`'s first, which turns
-  // most pixels away before `own`'s is worked out.
-  double s_other, s_own;
-  if (!DepthOnPlane(pd, s, other, s_other)) return false;
+bool WithinCreaseGate(const Eigen::Vector3d& p, double s, const RayPlane& other,
+                      const DetectionParams& params, double* s_other) {
+  if (!DepthOnPlane(p, s, other, *s_other)) return false;
   const double sigma = params.Sigma(s);
-  if (sigma > 0.0 && std::abs(s_other - s) > kCreaseGateSigmas * sigma) return false;
-  if (!DepthOnPlane(pd, s, own, s_own)) return false;
+  return !(sigma > 0.0 && std::abs(*s_other - s) > kCreaseGateSigmas * sigma);
+}
+
+bool SeesOther(const Eigen::Vector3d& p, double s, double s_other, const RayPlane& own,
+               const RayPlane& other) {
+  double s_own;
+  if (!DepthOnPlane(p, s, own, s_own)) return false;
   // Signed offsets of each region's centroid from the other's plane (< 0: on the sensor side).
   const double own_vs_other = other.normal.dot(own.centroid) - other.d;
   const double other_vs_own = own.normal.dot(other.centroid) - own.d;
   if (own_vs_other < 0.0 && other_vs_own < 0.0) return s_other < s_own;  // concave
   if (own_vs_other > 0.0 && other_vs_own > 0.0) return s_other > s_own;  // convex
   return std::abs(s_other - s) < std::abs(s_own - s);
+}
+
+bool VisibleHere(const Eigen::Vector3f& p, double s, const RayPlane& own, const RayPlane& other,
+                 const DetectionParams& params) {
+  // The gate on `other` first, which turns most pixels away before `own`'s depth is worked out.
+  const Eigen::Vector3d pd = p.cast<double>();
+  double s_other;
+  return WithinCreaseGate(pd, s, other, params, &s_other) && SeesOther(pd, s, s_other, own, other);
 }
 
 CreaseEvidence NeighbourhoodEvidence(const datasets::OrganizedCloud& cloud, int x, int y,
@@ -262,14 +271,14 @@ std::vector<RayPlane> FitAlongRays(const datasets::OrganizedCloud& cloud,
       // can: a pixel near the line where two planes meet fits both, and a band of one surface
       // along that line, beyond where the other surface ends, would tilt the other's plane.
       // Visibility decides where the window fits both or neither (a window across a depth edge).
-      if (RayOffset(cloud.points[i], s, planes[other]) > kCreaseGateSigmas * params.Sigma(s)) {
-        continue;
-      }
+      const Eigen::Vector3d p = cloud.points[i].cast<double>();
+      double s_other;
+      if (!WithinCreaseGate(p, s, planes[other], params, &s_other)) continue;
       const CreaseEvidence evidence =
           NeighbourhoodEvidence(cloud, x, y, spherical, planes[r], planes[other], params);
       if (evidence == CreaseEvidence::kOther) return other;
       if (evidence == CreaseEvidence::kUndecided &&
-          VisibleHere(cloud.points[i], s, planes[r], planes[other], params)) {
+          SeesOther(p, s, s_other, planes[r], planes[other])) {
         return other;
       }
     }

@@ -43,6 +43,17 @@ struct RayPlane {
 /// The ray fit of a region with ray sums `sums` and moments `region` (not ok under 3 points).
 RayPlane SolveRegion(const RaySums& sums, const MomentSums& region);
 
+/// Whether the ray of point p (at depth or range s) meets `other`'s plane within
+/// kCreaseGateSigmas sigma(s) of p (anywhere in front of the sensor when the model has no noise);
+/// the depth where it meets it in `s_other`.
+bool WithinCreaseGate(const Eigen::Vector3d& p, double s, const RayPlane& other,
+                      const DetectionParams& params, double* s_other);
+
+/// For a pixel within the crease gate of `other` (its ray meets that plane at `s_other`):
+/// whether its ray sees `other`'s surface where the two planes meet (see VisibleHere).
+bool SeesOther(const Eigen::Vector3d& p, double s, double s_other, const RayPlane& own,
+               const RayPlane& other);
+
 /// Whether pixel p of region `own` shows region `other`'s surface instead: `other`'s plane is
 /// within kCreaseGateSigmas sigma(s) along the ray, and it is the plane the ray sees where the
 /// two meet. At a concave crease (each region in front of the other's plane, e.g. a wall corner

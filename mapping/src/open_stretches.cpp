@@ -144,11 +144,8 @@ std::vector<std::size_t> ReinterpolateOutliers(std::vector<TrackedPose>* poses) 
   for (std::size_t i = begin; i < end; ++i) {
     const std::size_t lo = std::max(begin, i - std::min(i, kScaleHalfWidth));
     const std::size_t hi = std::min(end, i + kScaleHalfWidth + 1);
-    // The upper median: the middle value, or the larger of the two middle ones.
     std::vector<double> around(deviation.begin() + lo, deviation.begin() + hi);
-    const auto middle = around.begin() + static_cast<std::ptrdiff_t>(around.size() / 2);
-    std::nth_element(around.begin(), middle, around.end());
-    limit[i] = std::max(kOutlierFloor, kOutlierFactor * *middle);
+    limit[i] = std::max(kOutlierFloor, kOutlierFactor * registration::UpperMedian(&around));
   }
   // The worst outlier first: two neighbouring outliers would otherwise bend the lines of the
   // poses next to them; once one is replaced, the deviations that read it are recomputed.

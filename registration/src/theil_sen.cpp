@@ -5,12 +5,18 @@
 #include <cstddef>
 
 namespace planeslam::registration {
-double Median(std::vector<double>* values) {
-  const std::size_t k = values->size() / 2;
-  const auto middle = values->begin() + static_cast<std::ptrdiff_t>(k);
+
+double UpperMedian(std::vector<double>* values) {
+  const auto middle = values->begin() + static_cast<std::ptrdiff_t>(values->size() / 2);
   std::nth_element(values->begin(), middle, values->end());
-  const double upper = *middle;
+  return *middle;
+}
+
+double Median(std::vector<double>* values) {
+  const double upper = UpperMedian(values);
   if (values->size() % 2 == 1) return upper;
+  // UpperMedian left the lower half before the middle.
+  const auto middle = values->begin() + static_cast<std::ptrdiff_t>(values->size() / 2);
   return 0.5 * (upper + *std::max_element(values->begin(), middle));
 }
 

@@ -16,6 +16,9 @@ struct TheilSenLine {
 
 /// Median of a non-empty list (the mean of the two middle values for an even count); reorders it.
 double Median(std::vector<double>* values);
+/// The middle value of a non-empty list, the larger of the two middle ones for an even count;
+/// reorders it.
+double UpperMedian(std::vector<double>* values);
 
 /// The line through (t_k, x_k), its value taken at t = `origin`.
 TheilSenLine FitTheilSenLine(const std::vector<double>& t, const std::vector<Eigen::Vector3d>& x,
