@@ -152,7 +152,7 @@ std::vector<std::size_t> ReinterpolateOutliers(std::vector<TrackedPose>* poses) 
   std::vector<bool> replaced(p.size(), false);
   std::priority_queue<std::pair<double, std::size_t>> queue;
   const auto consider = [&](std::size_t i) {
-    if (!p[i].anchored && !replaced[i] && deviation[i] > limit[i]) {
+    if (!replaced[i] && deviation[i] > limit[i]) {
       queue.emplace(deviation[i] / limit[i], i);
     }
   };

@@ -194,9 +194,9 @@ TEST(OpenStretches, StretchesWithoutMeasuredEndsStayAsTheyAre) {
   }
 }
 
-/// Poses along `truth` with isotropic noise `noise` [m] per axis, every `keyframe_every`-th
-/// anchored, and outliers: `count` poses (single ones and, every third, a pair of neighbours),
-/// apart from each other and the ends, moved by `size_min`-`size_max` [m] in random directions.
+/// Poses along `truth` with isotropic noise `noise` [m] per axis, and outliers: `count` poses
+/// (single ones and, every third, a pair of neighbours), apart from each other and the ends, moved
+/// by `size_min`-`size_max` [m] in random directions.
 struct OutlierDraw {
   std::vector<Pose> truth;
   std::vector<TrackedPose> poses;
@@ -206,7 +206,6 @@ struct OutlierDraw {
 OutlierDraw MakeOutlierDraw(std::mt19937& rng, const std::vector<Pose>& truth,
                             const std::vector<double>& time, double noise, int count,
                             double size_min, double size_max) {
-  constexpr std::size_t kKeyframeEvery = 6;
   constexpr std::size_t kApart = 15;
   std::normal_distribution<double> g(0.0, 1.0);
   std::uniform_real_distribution<double> u(0.0, 1.0);
@@ -217,14 +216,13 @@ OutlierDraw MakeOutlierDraw(std::mt19937& rng, const std::vector<Pose>& truth,
     pose.timestamp = time[i];
     pose.T_world = truth[i];
     pose.T_world.translation() += noise * Eigen::Vector3d(g(rng), g(rng), g(rng));
-    pose.anchored = i % kKeyframeEvery == 0;
     draw.poses.push_back(pose);
   }
   std::vector<std::size_t> taken;
   std::uniform_int_distribution<std::size_t> at(kApart, truth.size() - kApart - 2);
   while (static_cast<int>(taken.size()) < count) {
     const std::size_t i = at(rng);
-    bool free = !draw.poses[i].anchored && !draw.poses[i + 1].anchored;
+    bool free = true;
     for (const std::size_t j : taken) free = free && (i > j + kApart || j > i + kApart);
     if (!free) continue;
     taken.push_back(i);
@@ -240,8 +238,8 @@ OutlierDraw MakeOutlierDraw(std::mt19937& rng, const std::vector<Pose>& truth,
   return draw;
 }
 
-/// Every outlier found and brought back near the truth; nothing else, no rotation and no anchored
-/// pose moved. Returns the largest error of a replaced pose [m].
+/// Every outlier found and brought back near the truth; nothing else and no rotation moved. Returns
+/// the largest error of a replaced pose [m].
 double CheckOutliersReplaced(const OutlierDraw& draw, int d) {
   std::vector<TrackedPose> poses = draw.poses;
   const std::vector<std::size_t> found = ReinterpolateOutliers(&poses);
