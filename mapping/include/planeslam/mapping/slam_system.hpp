@@ -117,7 +117,7 @@ struct SlamConfig {
   /// odometry edge between them in the output trajectory (else they follow their keyframe
   /// rigidly, and the whole correction shows as a jump at the next keyframe); and where tracking
   /// left translations to the prior, the positions follow the curve through the measured
-  /// motion on both sides of the stretch, read over velocity_window; a frame (not a keyframe)
+  /// motion on both sides of the stretch, read over velocity_window; a frame (a keyframe too)
   /// far off the motion of the frames on both sides takes that motion's position
   /// (open_stretches.hpp).
   bool interpolate_frames = true;
