@@ -148,27 +148,31 @@ std::vector<std::size_t> ReinterpolateOutliers(std::vector<TrackedPose>* poses) 
     limit[i] = std::max(kOutlierFloor, kOutlierFactor * registration::UpperMedian(&around));
   }
   // The worst outlier first: two neighbouring outliers would otherwise bend the lines of the
-  // poses next to them; once one is replaced, the deviations that read it are recomputed.
+  // poses next to them; once one is replaced, the deviations that read it are recomputed. The
+  // frames between keyframes first, then the keyframes: the frames around a keyframe were tracked
+  // against it, and where they and it disagree they are the likelier culprits.
   std::vector<bool> replaced(p.size(), false);
-  std::priority_queue<std::pair<double, std::size_t>> queue;
-  const auto consider = [&](std::size_t i) {
-    if (!replaced[i] && deviation[i] > limit[i]) {
-      queue.emplace(deviation[i] / limit[i], i);
-    }
-  };
-  for (std::size_t i = begin; i < end; ++i) consider(i);
-  while (!queue.empty()) {
-    const auto [ratio, worst] = queue.top();
-    queue.pop();
-    if (replaced[worst] || ratio != deviation[worst] / limit[worst]) continue;  // stale
-    p[worst].T_world.translation() = BothSidesPrediction(p, worst);
-    replaced[worst] = true;
-    outliers.push_back(worst);
-    const std::size_t lo = std::max(begin, worst - kSidePoses);
-    for (std::size_t i = lo; i < std::min(end, worst + kSidePoses + 1); ++i) {
-      if (replaced[i]) continue;
-      deviation[i] = (p[i].T_world.translation() - BothSidesPrediction(p, i)).norm();
-      consider(i);
+  for (const bool keyframes : {false, true}) {
+    std::priority_queue<std::pair<double, std::size_t>> queue;
+    const auto consider = [&](std::size_t i) {
+      if (p[i].keyframe == keyframes && !replaced[i] && deviation[i] > limit[i]) {
+        queue.emplace(deviation[i] / limit[i], i);
+      }
+    };
+    for (std::size_t i = begin; i < end; ++i) consider(i);
+    while (!queue.empty()) {
+      const auto [ratio, worst] = queue.top();
+      queue.pop();
+      if (replaced[worst] || ratio != deviation[worst] / limit[worst]) continue;  // stale
+      p[worst].T_world.translation() = BothSidesPrediction(p, worst);
+      replaced[worst] = true;
+      outliers.push_back(worst);
+      const std::size_t lo = std::max(begin, worst - kSidePoses);
+      for (std::size_t i = lo; i < std::min(end, worst + kSidePoses + 1); ++i) {
+        if (replaced[i]) continue;
+        deviation[i] = (p[i].T_world.translation() - BothSidesPrediction(p, i)).norm();
+        consider(i);
+      }
     }
   }
   // An outlier replaced while its neighbour was still out was read through it: read again.

@@ -538,6 +538,7 @@ datasets::Trajectory SlamSystem::EstimatedTrajectory(std::vector<double>* outlie
     poses[f].timestamp = record.timestamp;
     poses[f].open = record.open;
     poses[f].T_world = T_world_keyframe * record.T_keyframe_frame;
+    poses[f].keyframe = keyframes_[static_cast<std::size_t>(record.keyframe_id)].frame == f;
     if (measured == measured_in_previous.end()) continue;
     // The optimiser corrects the odometry edge to the next keyframe as a whole:
     // T_keyframe_next = correction * measured. The frames between the two were tracked against

@@ -27,19 +27,22 @@ struct TrackedPose {
   /// Unit directions (world axes; translation, then rotation, each column one or the other) its
   /// tracking left to the prior; none when it measured all six. Only the translations move.
   Eigen::Matrix<double, 6, Eigen::Dynamic> open = Eigen::Matrix<double, 6, 0>();
+  /// A keyframe's pose (the pose graph's): judged as an outlier after the other poses.
+  bool keyframe = false;
 };
 
 /// Replaces the position of every pose that the motion on both sides contradicts by that motion's
 /// prediction, and returns their indices (sorted): a registration that matched a wrongly fitted
-/// sliver of a plane, or a fill that slid along a wall, for a frame or two. A keyframe's pose is
-/// judged too: the graph holds a keyframe whose own registration slid where nothing else ties it
-/// down, while the frames tracked after it are corrected towards the next keyframe (the map keeps
-/// what that keyframe's pose placed). The prediction is the Hermite curve between the states read
-/// from the five poses on each side (Theil-Sen lines, robust to a second wrong pose among them),
-/// exact on any motion of constant acceleration. A pose is an outlier when it is off its prediction
-/// by more than ten times the median of that distance over the poses within fifty frames, and by
-/// more than a millimetre; the worst is replaced first and its neighbours judged again. The five
-/// poses at either end are not judged; rotations are kept. Timestamps must increase.
+/// sliver of a plane, or a fill that slid along a wall, for a frame or two. Keyframes are judged
+/// once the other poses' outliers are replaced: the graph holds a keyframe whose own registration
+/// slid where nothing else ties it down, while the frames tracked after it are corrected towards
+/// the next keyframe (the map keeps what that keyframe's pose placed). The prediction is the
+/// Hermite curve between the states read from the five poses on each side (Theil-Sen lines,
+/// robust to a second wrong pose among them), exact on any motion of constant acceleration. A
+/// pose is an outlier when it is off its prediction by more than ten times the median of that
+/// distance over the poses within fifty frames, and by more than a millimetre; the worst is
+/// replaced first and its neighbours judged again. The five poses at either end are not judged;
+/// rotations are kept. Timestamps must increase.
 std::vector<std::size_t> ReinterpolateOutliers(std::vector<TrackedPose>* poses);
 
 /// Re-interpolates the open translations of every stretch of consecutive poses with open
