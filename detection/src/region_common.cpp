@@ -83,8 +83,6 @@ CreaseEvidence NeighbourhoodEvidence(const datasets::OrganizedCloud& cloud, int 
   // The mean point of the valid pixels of the 3x3 window, and how far along its ray each plane
   // lies from it: the noise of a mean of n points is sigma / sqrt(n), so the window tells apart
   // planes a single pixel's depth cannot. Float: the offsets meet millimetres of noise.
-  const auto sigma0 = static_cast<float>(params.sigma0);
-  const auto sigma_z2 = static_cast<float>(params.sigma_z2);
   Eigen::Vector3f sum = Eigen::Vector3f::Zero();
   float sigma2 = 0.0f;
   int n = 0;
@@ -97,7 +95,7 @@ CreaseEvidence NeighbourhoodEvidence(const datasets::OrganizedCloud& cloud, int 
       const float s = PointDepth(q, spherical);
       if (!(s > 0.0f)) continue;
       sum += q;
-      const float sigma = sigma0 + sigma_z2 * s * s;
+      const float sigma = params.Sigma(s);
       sigma2 += sigma * sigma;
       ++n;
     }

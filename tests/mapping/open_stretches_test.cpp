@@ -279,18 +279,20 @@ std::vector<double> OutlierFamily(std::mt19937& rng, int draws, const MakeTruth&
   return worst;
 }
 
+/// One of the hand-held motions above, sampled at kRate for kDuration.
+void HandHeld(std::mt19937& rng, std::vector<Pose>* truth, std::vector<double>* time) {
+  const Motion motion(rng);
+  for (std::size_t i = 0; i < static_cast<std::size_t>(kDuration * kRate); ++i) {
+    time->push_back(static_cast<double>(i) / kRate);
+    truth->push_back(motion.PoseAt(time->back()));
+  }
+}
+
 TEST(Outliers, HandHeldSensorSinglePosesAndPairsAreReplaced) {
   // The hand-held motions above, 1 mm noise, outliers of 2.5-6 cm (a wrongly fitted sliver of a
   // plane, a fill that slid along a wall).
   std::mt19937 rng(3);
-  const auto hand_held = [](std::mt19937& r, std::vector<Pose>* truth, std::vector<double>* time) {
-    const Motion motion(r);
-    for (std::size_t i = 0; i < static_cast<std::size_t>(kDuration * kRate); ++i) {
-      time->push_back(static_cast<double>(i) / kRate);
-      truth->push_back(motion.PoseAt(time->back()));
-    }
-  };
-  const std::vector<double> worst = OutlierFamily(rng, 50, hand_held, kNoise, 6, 0.025, 0.06);
+  const std::vector<double> worst = OutlierFamily(rng, 50, HandHeld, kNoise, 6, 0.025, 0.06);
   std::printf("replaced poses' largest error: median %.2f mm, worst %.2f mm\n",
               1e3 * worst[worst.size() / 2], 1e3 * worst.back());
   EXPECT_LT(worst.back(), 4 * kNoise);
@@ -335,16 +337,10 @@ TEST(Outliers, FramesTrackedAroundAKeyframeGoBeforeIt) {
   std::uniform_real_distribution<double> u(0.0, 1.0);
   int failures = 0;
   for (int d = 0; d < 50; ++d) {
-    const Motion motion(rng);
-    std::vector<TrackedPose> poses;
-    for (std::size_t i = 0; i < static_cast<std::size_t>(kDuration * kRate); ++i) {
-      TrackedPose pose;
-      pose.timestamp = static_cast<double>(i) / kRate;
-      pose.T_world = motion.PoseAt(pose.timestamp);
-      pose.T_world.translation() += kNoise * Eigen::Vector3d(g(rng), g(rng), g(rng));
-      pose.keyframe = i % kKeyframeEvery == 0;
-      poses.push_back(pose);
-    }
+    std::vector<Pose> truth;
+    std::vector<double> time;
+    HandHeld(rng, &truth, &time);
+    std::vector<TrackedPose> poses = MakeOutlierDraw(rng, truth, time, kNoise, 0, 0.0, 0.0).poses;
     const std::size_t k = kKeyframeEvery * (10 + static_cast<std::size_t>(20 * u(rng)));
     const Eigen::Vector3d offset =
         (0.025 + 0.015 * u(rng)) * Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized();

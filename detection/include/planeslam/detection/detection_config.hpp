@@ -73,6 +73,10 @@ struct DetectionParams {
 
   /// Sensor noise sigma at depth (or range) z [m].
   double Sigma(double z) const { return sigma0 + sigma_z2 * z * z; }
+  /// The same in float, for loops over pixels.
+  float Sigma(float z) const {
+    return static_cast<float>(sigma0) + static_cast<float>(sigma_z2) * z * z;
+  }
   double Sigma2(double z) const {
     const double s = Sigma(z);
     return s * s;
